@@ -1,0 +1,120 @@
+"""`sinmdm`: train, export and evaluate. torch is imported only inside the
+commands that need it (train, info, export)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Optional
+
+import typer
+from rich.table import Table
+
+from ..runtime.errors import SinMDMError
+from .common import console, print_json, run_app
+
+app = typer.Typer(
+    name="sinmdm",
+    help="Train SinMDM on one motion clip, export it to ONNX, evaluate samples.",
+    no_args_is_help=True,
+    add_completion=False,
+)
+
+
+def _require_torch() -> None:
+    try:
+        import torch  # noqa: F401
+    except ImportError:
+        raise SinMDMError("this command needs the training extra: pip install 'sinmdm[train]'") from None
+
+
+@app.command()
+def train(
+    clip: Path = typer.Argument(..., help="The BVH clip to learn from."),
+    out: Path = typer.Option(..., "--out", "-o", help="Run directory (checkpoints, config, log)."),
+    preset: str = typer.Option("cpu", "--preset", help="Recipe: cpu (minutes on a laptop) or paper (the authors', needs a GPU)."),
+    steps: Optional[int] = typer.Option(None, "--steps", help="Total iterations to reach (default: the preset's)."),
+    device: str = typer.Option("auto", "--device", help="auto (CUDA, then MPS, then CPU), cpu, cuda, mps."),
+    seed: int = typer.Option(0, "--seed"),
+    resume: bool = typer.Option(False, "--resume", help="Continue the run in --out from its last checkpoint."),
+    width: Optional[int] = typer.Option(None, "--width", help="Network width (paper: 256)."),
+    crop: Optional[int] = typer.Option(None, "--crop", help="Training crop length in frames (cpu preset: 64)."),
+    batch: Optional[int] = typer.Option(None, "--batch", help="Batch size (default 64)."),
+    checkpoint_every: Optional[int] = typer.Option(None, "--checkpoint-every", help="Iterations between checkpoints."),
+    fps: float = typer.Option(30.0, "--fps", help="Feature frame rate."),
+    units: str = typer.Option("auto", "--units", help="File units: auto, m, cm, mm, in, ft, or metres per unit."),
+    source_fps: Optional[float] = typer.Option(None, "--source-fps", help="Override the clip's frame rate."),
+    contacts: Optional[str] = typer.Option(None, "--contacts", help="Comma-separated contact joints (default: detected)."),
+) -> None:
+    """Train a denoiser on one clip."""
+    _require_torch()
+    from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+
+    from ..train.presets import preset as get_preset
+    from ..train.trainer import train as run_training
+
+    config = get_preset(preset).with_overrides(
+        steps=steps, width=width, crop=crop, batch=batch, checkpoint_every=checkpoint_every, fps=fps
+    )
+    codec_options = {"units": units, "source_fps": source_fps,
+                     "contacts": "auto" if not contacts else [c.strip() for c in contacts.split(",")]}
+    with Progress(
+        TextColumn("[bold]training[/bold]"), BarColumn(), TextColumn("{task.completed}/{task.total}"),
+        TextColumn("loss {task.fields[loss]:.4f}"), TextColumn("{task.fields[rate]:.2f} it/s"),
+        TimeElapsedColumn(), TimeRemainingColumn(), console=console, transient=False,
+    ) as progress:
+        task = progress.add_task("train", total=config.steps, loss=float("nan"), rate=0.0)
+
+        def on_progress(step: int, total: int, loss: float, rate: float) -> None:
+            progress.update(task, completed=step, loss=loss, rate=rate)
+
+        result = run_training(clip, out, config, seed=seed, device=device, resume=resume,
+                              codec_options=codec_options, on_progress=on_progress)
+        progress.update(task, completed=result["step"])
+    console.print(
+        f"run [bold]{out}[/bold]: step {result['step']}/{result['steps']}, loss {result['loss']}, "
+        f"{result['parameters']:,} parameters, window {result['window']} frames, "
+        f"{result['elapsed_seconds']:.0f} s of training"
+    )
+
+
+@app.command()
+def info(
+    run_dir: Path = typer.Argument(..., help="A training run directory."),
+    as_json: bool = typer.Option(False, "--json", help="Print one JSON object."),
+) -> None:
+    """Show a run's configuration, parameter count and progress."""
+    from ..train.checkpoint import load_config
+
+    config = load_config(run_dir)
+    summary = {
+        "parameters": config["parameters"],
+        "step": config["step"],
+        "steps": config["steps"],
+        "finished": config["finished"],
+        "preset": config["train"]["preset"],
+        "clip": config["clip"],
+        "window": config["window"],
+        "receptive_field": config["receptive_field"],
+        "feature_width": config["model"]["features"],
+        "loss": config["loss"],
+        "elapsed_seconds": config["elapsed_seconds"],
+        "device": config["device"],
+        "train": config["train"],
+        "model": config["model"],
+    }
+    if as_json:
+        print_json(summary)
+        return
+    table = Table(show_header=False, box=None)
+    for key in ("preset", "step", "steps", "finished", "parameters", "window", "receptive_field",
+                "feature_width", "loss", "elapsed_seconds", "device"):
+        value = summary[key]
+        table.add_row(key.replace("_", " "), f"{value:,}" if isinstance(value, int) and not isinstance(value, bool) else str(value))
+    table.add_row("clip", f"{config['clip']['name']} ({config['clip']['frames']} frames, sha256 {config['clip']['sha256'][:12]})")
+    console.print(table)
+
+
+main = run_app(app)
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,142 @@
+"""`sinmdm-run`: everything the torch-free runtime does."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Optional
+
+import numpy as np
+import typer
+from rich.table import Table
+from rich.tree import Tree
+
+from ..runtime.errors import SinMDMError
+from .common import console, print_json, run_app
+
+app = typer.Typer(
+    name="sinmdm-run",
+    help="Sample, edit and convert motion with a trained SinMDM model (no torch needed).",
+    no_args_is_help=True,
+    add_completion=False,
+)
+
+UnitsOption = typer.Option("auto", "--units", help="File units: auto, m, cm, mm, in, ft, or metres per unit.")
+SourceFpsOption = typer.Option(None, "--source-fps", help="Override the clip's frame rate (for files with a wrong Frame Time).")
+ContactsOption = typer.Option(None, "--contacts", help="Comma-separated contact joint names (default: detected).")
+
+
+def _contacts(value: Optional[str]) -> str | list[str]:
+    return "auto" if not value else [name.strip() for name in value.split(",") if name.strip()]
+
+
+def _joint_tree(skeleton, contact_names: set[str]) -> Tree:
+    tree = Tree("[bold]skeleton[/bold]")
+    nodes: dict[int, Tree] = {}
+    for j, name in enumerate(skeleton.names):
+        parent = int(skeleton.parents[j])
+        channels = " ".join(c[0] + c[1:4] for c in skeleton.channels[j]) or "no channels"
+        mark = " [green](contact)[/green]" if name in contact_names else ""
+        label = f"{name} [dim]{channels}[/dim]{mark}"
+        nodes[j] = (tree if parent < 0 else nodes[parent]).add(label)
+    return tree
+
+
+@app.command()
+def inspect(
+    clip: Path = typer.Argument(..., help="A BVH file."),
+    units: str = UnitsOption,
+    source_fps: Optional[float] = SourceFpsOption,
+    contacts: Optional[str] = ContactsOption,
+    fps: float = typer.Option(30.0, "--fps", help="Feature frame rate used to detect contacts."),
+    as_json: bool = typer.Option(False, "--json", help="Print one JSON object."),
+) -> None:
+    """Show a clip's skeleton, length, units, contact joints and feature width."""
+    from ..runtime.animation import nominal_fps
+    from ..runtime.bvh import read_bvh
+    from ..runtime.features import build_codec, skeleton_size
+
+    bvh = read_bvh(clip)
+    codec = build_codec(bvh, fps=fps, units=units, contacts=_contacts(contacts), source_fps=source_fps)
+    skeleton = bvh.skeleton
+    clip_fps = source_fps or nominal_fps(bvh.frame_time)
+    contact_names = [skeleton.names[j] for j in codec.contact_joints]
+    warnings = []
+    if not 5 <= clip_fps <= 1000:
+        warnings.append(f"frame time {bvh.frame_time:g} s ({clip_fps:g} fps) looks wrong; pass --source-fps")
+    info = {
+        "file": str(clip),
+        "joints": skeleton.num_joints,
+        "roots": [skeleton.names[r] for r in skeleton.roots],
+        "end_sites": len(skeleton.end_sites),
+        "channels": skeleton.num_channels,
+        "frames": bvh.frames,
+        "frame_time": bvh.frame_time,
+        "fps": clip_fps,
+        "seconds": bvh.frames / clip_fps,
+        "metres_per_unit": codec.scale,
+        "size_m": skeleton_size(skeleton) * codec.scale,
+        "rotation_orders": sorted({skeleton.rotation_order(j) for j in range(skeleton.num_joints)} - {""}),
+        "trajectory_joint": None if codec.trajectory_joint is None else skeleton.names[codec.trajectory_joint],
+        "contact_joints": contact_names,
+        "feature_fps": codec.fps,
+        "feature_width": codec.width,
+        "warnings": warnings,
+    }
+    if as_json:
+        print_json(info)
+        return
+    console.print(_joint_tree(skeleton, set(contact_names)))
+    table = Table(show_header=False, box=None)
+    for key, value in info.items():
+        if key not in ("warnings",):
+            table.add_row(key.replace("_", " "), ", ".join(map(str, value)) if isinstance(value, list) else f"{value:.6g}" if isinstance(value, float) else str(value))
+    console.print(table)
+    for warning in warnings:
+        console.print(f"[yellow]warning:[/yellow] {warning}")
+
+
+@app.command()
+def convert(
+    source: Path = typer.Argument(..., help="Input BVH."),
+    target: Path = typer.Argument(..., help="Output BVH."),
+    fps: Optional[float] = typer.Option(None, "--fps", help="Output frame rate (default: the input's)."),
+    units: str = UnitsOption,
+    source_fps: Optional[float] = SourceFpsOption,
+    contacts: Optional[str] = ContactsOption,
+    force: bool = typer.Option(False, "--force", help="Overwrite an existing output file."),
+    as_json: bool = typer.Option(False, "--json", help="Print one JSON object."),
+) -> None:
+    """Read a clip, encode it to model features, decode and write it back."""
+    from ..runtime.animation import animation_from_bvh, global_positions, nominal_fps
+    from ..runtime.bvh import read_bvh, write_bvh
+    from ..runtime.features import build_codec, skeleton_size
+
+    if target.exists() and not force:
+        raise SinMDMError(f"{target} exists; pass --force to overwrite")
+    if target.suffix.lower() != ".bvh":
+        raise SinMDMError(f"cannot write '{target.suffix}' files: use .bvh")
+    bvh = read_bvh(source)
+    rate = fps or source_fps or nominal_fps(bvh.frame_time)
+    codec = build_codec(bvh, fps=rate, units=units, contacts=_contacts(contacts), source_fps=source_fps)
+    features = codec.encode(bvh, source_fps=source_fps)
+    out = codec.decode_bvh(features, codec.start_position(bvh, source_fps=source_fps))
+    write_bvh(target, out)
+    summary = {"source": str(source), "target": str(target), "frames": out.frames, "fps": out.fps,
+               "feature_width": codec.width}
+    if fps is None:
+        expected = global_positions(animation_from_bvh(bvh))
+        got = global_positions(animation_from_bvh(out))
+        error = float(np.abs(expected - got).max()) / skeleton_size(bvh.skeleton)
+        summary["max_position_error_of_size"] = error
+    if as_json:
+        print_json(summary)
+    else:
+        console.print(f"wrote [bold]{target}[/bold]: {out.frames} frames at {out.fps:g} fps, {codec.width} features")
+        if "max_position_error_of_size" in summary:
+            console.print(f"round-trip joint position error: {summary['max_position_error_of_size']:.2e} of skeleton size")
+
+
+main = run_app(app)
+
+if __name__ == "__main__":
+    main()

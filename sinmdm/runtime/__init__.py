@@ -1,0 +1,1 @@
+"""Torch-free runtime: BVH, motion features, ONNX model loading and sampling."""

@@ -1,0 +1,332 @@
+"""Motion features: the representation the model is trained on and samples.
+
+Per frame, in channel order (reference notes, section 4, generalised to any skeleton):
+  1. a 6D rotation (first two rows of the local rotation matrix) for every joint
+     with rotation channels;
+  2. the local translation (metres) of every other joint whose position
+     channels vary over the clip;
+  3. one contact label per contact joint;
+  4. the trajectory joint (the first with position channels) as (dx, y, dz):
+     x/z velocity per frame, y absolute; the start position is kept aside.
+
+A `MotionCodec` is everything needed to go both ways for one skeleton: it is
+built once from the training clip and stored in checkpoints and ONNX metadata.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .animation import Animation, animation_from_bvh, animation_to_bvh, global_positions, rest_positions
+from .bvh import BVH, Skeleton
+from .contacts import contact_labels, default_contact_speed, detect_contact_joints
+from .errors import SinMDMError
+from .resample import resample_linear, resample_quaternions
+from .rotations import matrix_to_6d, matrix_to_quat, quat_to_matrix, sixd_to_matrix
+
+ROT6D = ("r00", "r01", "r02", "r10", "r11", "r12")
+UNIT_SCALES = {"m": 1.0, "cm": 0.01, "mm": 0.001, "in": 0.0254, "ft": 0.3048}
+
+
+@dataclass(frozen=True)
+class FeatureBlock:
+    kind: str  # "rotation" | "translation" | "contact" | "root"
+    joint: str
+    start: int
+    stop: int
+    components: tuple[str, ...]
+
+
+@dataclass(frozen=True)
+class FeatureLayout:
+    """Which feature channels belong to which joint and component, by name."""
+
+    blocks: tuple[FeatureBlock, ...]
+
+    @property
+    def width(self) -> int:
+        return self.blocks[-1].stop if self.blocks else 0
+
+    def indices(self, kinds: tuple[str, ...] | None = None, joints: set[str] | None = None) -> np.ndarray:
+        """Channel indices of the blocks of the given kinds and/or joints."""
+        selected = [
+            np.arange(b.start, b.stop)
+            for b in self.blocks
+            if (kinds is None or b.kind in kinds) and (joints is None or b.joint in joints)
+        ]
+        return np.concatenate(selected) if selected else np.zeros(0, dtype=np.int64)
+
+    def joints(self, kind: str) -> list[str]:
+        return [b.joint for b in self.blocks if b.kind == kind]
+
+    def to_dict(self) -> list[dict]:
+        return [
+            {"kind": b.kind, "joint": b.joint, "start": b.start, "stop": b.stop, "components": list(b.components)}
+            for b in self.blocks
+        ]
+
+    @classmethod
+    def from_dict(cls, blocks: list[dict]) -> "FeatureLayout":
+        return cls(tuple(FeatureBlock(b["kind"], b["joint"], b["start"], b["stop"], tuple(b["components"])) for b in blocks))
+
+
+def skeleton_to_dict(skeleton: Skeleton) -> dict:
+    return {
+        "names": list(skeleton.names),
+        "parents": [int(p) for p in skeleton.parents],
+        "offsets": np.asarray(skeleton.offsets, dtype=float).tolist(),
+        "channels": [list(c) for c in skeleton.channels],
+        "end_sites": [[int(p), None if o is None else np.asarray(o, dtype=float).tolist()] for p, o in skeleton.end_sites],
+    }
+
+
+def skeleton_from_dict(data: dict) -> Skeleton:
+    return Skeleton(
+        names=tuple(data["names"]),
+        parents=np.asarray(data["parents"], dtype=np.int64),
+        offsets=np.asarray(data["offsets"], dtype=np.float64).reshape(-1, 3),
+        channels=tuple(tuple(c) for c in data["channels"]),
+        end_sites=tuple((int(p), None if o is None else np.asarray(o, dtype=np.float64)) for p, o in data["end_sites"]),
+    )
+
+
+def skeleton_size(skeleton: Skeleton) -> float:
+    """The character's size in file units: the largest extent of its rest pose
+    (End Sites included), never zero."""
+    points = rest_positions(skeleton)
+    if skeleton.end_sites:
+        ends = [points[p] + (0 if o is None else o) for p, o in skeleton.end_sites]
+        points = np.concatenate([points, np.asarray(ends)], axis=0)
+    return float(max(np.ptp(points, axis=0).max(), 1e-6))
+
+
+def unit_scale(skeleton: Skeleton, units: str | float = "auto") -> float:
+    """Metres per file unit. 'auto' guesses from the rest-pose size: characters
+    are taken to be between a few centimetres and ~20 m tall."""
+    if isinstance(units, (int, float)):
+        return float(units)
+    if units in UNIT_SCALES:
+        return UNIT_SCALES[units]
+    if units != "auto":
+        try:
+            return float(units)
+        except ValueError:
+            raise SinMDMError(f"unknown units '{units}': use auto, m, cm, mm, in, ft or metres per unit") from None
+    size = skeleton_size(skeleton)
+    if size > 300:
+        return 0.001
+    if size > 20:
+        return 0.01
+    return 1.0
+
+
+def resample_animation(animation: Animation, fps: float, method: str = "slerp") -> Animation:
+    """Change the frame rate: slerp rotations and interpolate translations, or
+    ('drop') keep every k-th frame as the reference code did (integer ratios only)."""
+    if abs(animation.fps - fps) < 1e-6 * fps:
+        return animation
+    if method == "drop":
+        step = animation.fps / fps
+        if abs(step - round(step)) > 1e-3 or round(step) < 1:
+            raise SinMDMError(f"cannot drop frames from {animation.fps:g} to {fps:g} fps: not an integer ratio")
+        k = int(round(step))
+        return Animation(animation.skeleton, animation.rotations[::k], animation.translations[::k], fps)
+    return Animation(
+        animation.skeleton,
+        resample_quaternions(animation.rotations, animation.fps, fps),
+        resample_linear(animation.translations, animation.fps, fps),
+        fps,
+    )
+
+
+def check_same_skeleton(expected: Skeleton, got: Skeleton, what: str = "clip") -> None:
+    if expected.names == got.names and np.array_equal(expected.parents, got.parents):
+        return
+    if len(expected.names) != len(got.names):
+        raise SinMDMError(
+            f"{what} has {len(got.names)} joints but the model's skeleton has {len(expected.names)}"
+        )
+    for j, (a, b) in enumerate(zip(expected.names, got.names)):
+        if a != b:
+            raise SinMDMError(f"{what} skeleton differs from the model's: joint {j} is '{b}', expected '{a}'")
+    j = int(np.flatnonzero(expected.parents != got.parents)[0])
+    raise SinMDMError(f"{what} skeleton differs from the model's: joint '{expected.names[j]}' has another parent")
+
+
+@dataclass(frozen=True)
+class MotionCodec:
+    skeleton: Skeleton
+    fps: float  # feature frame rate
+    scale: float  # metres per file unit
+    trajectory_joint: int | None
+    translation_joints: tuple[int, ...]
+    contact_joints: tuple[int, ...]
+    contact_speed: float  # metres per second
+    rest_translations: np.ndarray  # (J, 3) file units, used for translations that are not features
+    resample: str = "slerp"
+    layout: FeatureLayout = field(init=False, compare=False)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "layout", self._make_layout())
+
+    def _make_layout(self) -> FeatureLayout:
+        blocks, start = [], 0
+        names = self.skeleton.names
+
+        def add(kind: str, joint: str, components: tuple[str, ...]) -> None:
+            nonlocal start
+            blocks.append(FeatureBlock(kind, joint, start, start + len(components), components))
+            start += len(components)
+
+        for j in self.rotation_joints:
+            add("rotation", names[j], ROT6D)
+        for j in self.translation_joints:
+            add("translation", names[j], ("x", "y", "z"))
+        for j in self.contact_joints:
+            add("contact", names[j], ("contact",))
+        if self.trajectory_joint is not None:
+            add("root", names[self.trajectory_joint], ("dx", "y", "dz"))
+        return FeatureLayout(tuple(blocks))
+
+    @property
+    def rotation_joints(self) -> list[int]:
+        return [j for j in range(self.skeleton.num_joints) if self.skeleton.rotation_order(j)]
+
+    @property
+    def width(self) -> int:
+        return self.layout.width
+
+    @property
+    def size(self) -> float:
+        """Character size in metres."""
+        return skeleton_size(self.skeleton) * self.scale
+
+    # ------------------------------------------------------------------ encode
+    def animation(self, clip: BVH | Animation, source_fps: float | None = None) -> Animation:
+        """The clip as an animation on this codec's skeleton, at the codec's frame rate."""
+        animation = animation_from_bvh(clip) if isinstance(clip, BVH) else clip
+        check_same_skeleton(self.skeleton, animation.skeleton)
+        if source_fps is not None:
+            animation = Animation(animation.skeleton, animation.rotations, animation.translations, source_fps)
+        return resample_animation(animation, self.fps, self.resample)
+
+    def encode(self, clip: BVH | Animation, source_fps: float | None = None) -> np.ndarray:
+        """(T, F) float32 features at the codec's frame rate."""
+        animation = self.animation(clip, source_fps)
+        parts = []
+        matrices = quat_to_matrix(animation.rotations[:, self.rotation_joints])
+        parts.append(matrix_to_6d(matrices).reshape(animation.frames, -1))
+        metres = animation.translations * self.scale
+        parts.append(metres[:, list(self.translation_joints)].reshape(animation.frames, -1))
+        if self.contact_joints:
+            positions = global_positions(animation)[:, list(self.contact_joints)] * self.scale
+            parts.append(contact_labels(positions, self.fps, self.contact_speed))
+        if self.trajectory_joint is not None:
+            root = metres[:, self.trajectory_joint]
+            velocity = np.diff(root[:, [0, 2]], axis=0)
+            velocity = np.concatenate([velocity[:1] if len(velocity) else np.zeros((1, 2)), velocity], axis=0)
+            parts.append(np.stack([velocity[:, 0], root[:, 1], velocity[:, 1]], axis=1))
+        return np.concatenate(parts, axis=1).astype(np.float32)
+
+    def start_position(self, clip: BVH | Animation, source_fps: float | None = None) -> np.ndarray:
+        """(x, z) of the trajectory joint at the first frame, in metres."""
+        if self.trajectory_joint is None:
+            return np.zeros(2)
+        animation = self.animation(clip, source_fps)
+        return animation.translations[0, self.trajectory_joint, [0, 2]] * self.scale
+
+    # ------------------------------------------------------------------ decode
+    def decode(self, features: np.ndarray, start: np.ndarray | None = None) -> Animation:
+        """Animation at the codec's frame rate from (T, F) features; the root path is
+        re-integrated from `start` (x, z in metres, default the origin)."""
+        features = np.asarray(features, dtype=np.float64)
+        if features.ndim != 2 or features.shape[1] != self.width:
+            raise SinMDMError(f"features have shape {features.shape}, expected (frames, {self.width})")
+        frames, joints = features.shape[0], self.skeleton.num_joints
+        matrices = np.broadcast_to(np.eye(3), (frames, joints, 3, 3)).copy()
+        rot = self.layout.indices(("rotation",))
+        matrices[:, self.rotation_joints] = sixd_to_matrix(features[:, rot].reshape(frames, -1, 6))
+        translations = np.broadcast_to(self.rest_translations, (frames, joints, 3)).copy()
+        if self.translation_joints:
+            tr = self.layout.indices(("translation",))
+            translations[:, list(self.translation_joints)] = features[:, tr].reshape(frames, -1, 3) / self.scale
+        if self.trajectory_joint is not None:
+            dx, y, dz = features[:, self.layout.indices(("root",))].T
+            origin = np.zeros(2) if start is None else np.asarray(start, dtype=np.float64)
+            x = origin[0] + np.concatenate([[0.0], np.cumsum(dx[1:])])
+            z = origin[1] + np.concatenate([[0.0], np.cumsum(dz[1:])])
+            translations[:, self.trajectory_joint] = np.stack([x, y, z], axis=1) / self.scale
+        return Animation(self.skeleton, matrix_to_quat(matrices), translations, self.fps)
+
+    def decode_bvh(self, features: np.ndarray, start: np.ndarray | None = None) -> BVH:
+        return animation_to_bvh(self.decode(features, start))
+
+    # ----------------------------------------------------------- serialise
+    def to_dict(self) -> dict:
+        names = self.skeleton.names
+        return {
+            "skeleton": skeleton_to_dict(self.skeleton),
+            "fps": self.fps,
+            "scale": self.scale,
+            "trajectory_joint": None if self.trajectory_joint is None else names[self.trajectory_joint],
+            "translation_joints": [names[j] for j in self.translation_joints],
+            "contact_joints": [names[j] for j in self.contact_joints],
+            "contact_speed": self.contact_speed,
+            "rest_translations": np.asarray(self.rest_translations).tolist(),
+            "resample": self.resample,
+            "layout": self.layout.to_dict(),
+        }
+
+    @classmethod
+    def from_dict(cls, data: dict) -> "MotionCodec":
+        skeleton = skeleton_from_dict(data["skeleton"])
+        index = {n: i for i, n in enumerate(skeleton.names)}
+        codec = cls(
+            skeleton=skeleton,
+            fps=float(data["fps"]),
+            scale=float(data["scale"]),
+            trajectory_joint=None if data["trajectory_joint"] is None else index[data["trajectory_joint"]],
+            translation_joints=tuple(index[n] for n in data["translation_joints"]),
+            contact_joints=tuple(index[n] for n in data["contact_joints"]),
+            contact_speed=float(data["contact_speed"]),
+            rest_translations=np.asarray(data["rest_translations"], dtype=np.float64),
+            resample=data.get("resample", "slerp"),
+        )
+        if "layout" in data and codec.layout.to_dict() != data["layout"]:
+            raise SinMDMError("stored feature layout does not match the one this version derives")
+        return codec
+
+
+def build_codec(
+    clip: BVH,
+    fps: float = 30.0,
+    units: str | float = "auto",
+    contacts: str | list[str] = "auto",
+    contact_speed: float | None = None,
+    source_fps: float | None = None,
+    resample: str = "slerp",
+) -> MotionCodec:
+    """Derive the feature codec for a clip's skeleton from the clip itself."""
+    skeleton = clip.skeleton
+    scale = unit_scale(skeleton, units)
+    animation = animation_from_bvh(clip)
+    if source_fps is not None:
+        animation = Animation(skeleton, animation.rotations, animation.translations, source_fps)
+    animation = resample_animation(animation, fps, resample)
+    size = skeleton_size(skeleton) * scale
+
+    positioned = [j for j in range(skeleton.num_joints) if skeleton.position_channels(j)]
+    trajectory = positioned[0] if positioned else None
+    spread = np.ptp(animation.translations * scale, axis=0).max(axis=1)  # (J,) metres
+    moving = tuple(j for j in positioned if j != trajectory and spread[j] > 1e-6 * size)
+    rest = animation.translations.mean(axis=0)
+
+    if contacts == "auto":
+        positions = global_positions(animation) * scale
+        contact_joints = tuple(detect_contact_joints(positions, fps, size))
+    else:
+        contact_joints = tuple(skeleton.index(name) for name in contacts)
+    speed = default_contact_speed(size) if contact_speed is None else float(contact_speed)
+    return MotionCodec(skeleton, float(fps), scale, trajectory, moving, contact_joints, speed, rest, resample)

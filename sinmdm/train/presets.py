@@ -1,0 +1,67 @@
+"""Training recipes. `paper` is the authors' recipe (reference notes section 3);
+`cpu` is designed for 2 CPU cores (see BENCHMARKS.md for how it was chosen)."""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, fields, replace
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    preset: str
+    steps: int
+    batch: int = 64
+    crop: int | None = None  # frames per training example; None = the whole clip
+    rescale: tuple[float, float] | None = (0.75, 1.25)  # random time-rescale range per iteration
+    lr: float = 1e-4
+    lr_schedule: str = "exponential"  # "exponential" (gamma per step) | "linear-tail" (linear decay to 0 over the last `tail` share)
+    lr_gamma: float = 0.99998
+    lr_tail: float = 0.3
+    weight_decay: float = 0.0
+    ema: float | None = None
+    bf16: bool = False  # autocast where the device supports it
+    width: int = 256
+    norm: str = "group"
+    dropout: float = 0.5
+    fps: float = 30.0
+    checkpoint_every: int = 200
+    log_every: int = 10
+
+    def to_dict(self) -> dict:
+        data = asdict(self)
+        data["rescale"] = list(self.rescale) if self.rescale else None
+        return data
+
+    @classmethod
+    def from_dict(cls, data: dict) -> "TrainConfig":
+        known = {f.name for f in fields(cls)}
+        values = {k: v for k, v in data.items() if k in known}
+        if values.get("rescale") is not None:
+            values["rescale"] = tuple(values["rescale"])
+        return cls(**values)
+
+    def with_overrides(self, **changes) -> "TrainConfig":
+        return replace(self, **{k: v for k, v in changes.items() if v is not None})
+
+
+PRESETS = {
+    "paper": TrainConfig(preset="paper", steps=60_000),
+    "cpu": TrainConfig(
+        preset="cpu",
+        steps=3_000,
+        crop=64,
+        rescale=None,
+        lr=2e-4,
+        lr_schedule="linear-tail",
+        ema=0.999,
+        bf16=True,
+    ),
+}
+
+
+def preset(name: str) -> TrainConfig:
+    from ..runtime.errors import SinMDMError
+
+    if name not in PRESETS:
+        raise SinMDMError(f"unknown preset '{name}': choose one of {', '.join(PRESETS)}")
+    return PRESETS[name]

@@ -1,0 +1,301 @@
+"""The training loop: one clip in, a durable, resumable run directory out."""
+
+from __future__ import annotations
+
+import copy
+import json
+import math
+import time
+from dataclasses import dataclass
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+import torch
+
+from .. import __version__
+from ..runtime.atomic import check_writable_dir, write_text_atomic
+from ..runtime.bvh import read_bvh
+from ..runtime.errors import SinMDMError
+from ..runtime.features import MotionCodec, build_codec
+from ..runtime.schedule import NUM_TIMESTEPS
+from .checkpoint import CONFIG, LOG, RUN_FORMAT, file_sha256, load_config, load_state, save_run
+from .data import BatchSampler
+from .diffusion import GaussianDiffusion
+from .model import Denoiser, ModelConfig, count_parameters, receptive_field
+from .presets import TrainConfig
+
+
+def resolve_device(name: str = "auto") -> torch.device:
+    """`auto` picks CUDA, then Apple's MPS, then the CPU."""
+    if name == "auto":
+        if torch.cuda.is_available():
+            return torch.device("cuda")
+        if getattr(torch.backends, "mps", None) is not None and torch.backends.mps.is_available():
+            return torch.device("mps")
+        return torch.device("cpu")
+    try:
+        device = torch.device(name)
+    except RuntimeError:
+        raise SinMDMError(f"unknown device '{name}': use auto, cpu, cuda or mps") from None
+    if device.type == "cuda" and not torch.cuda.is_available():
+        raise SinMDMError("--device cuda requested but no CUDA GPU is available")
+    return device
+
+
+def bf16_supported(device: torch.device) -> bool:
+    if device.type == "cuda":
+        return torch.cuda.is_bf16_supported()
+    if device.type == "cpu":
+        return bool(torch.ops.mkldnn._is_mkldnn_bf16_supported())
+    return False
+
+
+def learning_rate_factor(config: TrainConfig) -> Callable[[int], float]:
+    if config.lr_schedule == "exponential":
+        return lambda step: config.lr_gamma**step
+    if config.lr_schedule == "linear-tail":
+        decay_start = (1.0 - config.lr_tail) * config.steps
+        return lambda step: 1.0 if step < decay_start else max(0.0, (config.steps - step) / max(config.steps - decay_start, 1))
+    if config.lr_schedule == "constant":
+        return lambda step: 1.0
+    raise SinMDMError(f"unknown learning-rate schedule '{config.lr_schedule}'")
+
+
+@dataclass
+class ClipData:
+    codec: MotionCodec
+    features: np.ndarray  # (T, F)
+    info: dict
+
+
+def load_clip(path: Path, fps: float, codec_options: dict) -> ClipData:
+    bvh = read_bvh(path)
+    codec = build_codec(bvh, fps=fps, **codec_options)
+    features = codec.encode(bvh, source_fps=codec_options.get("source_fps"))
+    if not np.isfinite(features).all():
+        raise SinMDMError(f"{path}: the clip's features contain NaN or infinite values")
+    info = {
+        "name": Path(path).name,
+        "sha256": file_sha256(path),
+        "frames": int(features.shape[0]),
+        "source_frames": bvh.frames,
+        "source_fps": codec_options.get("source_fps") or bvh.fps,
+    }
+    return ClipData(codec, features, info)
+
+
+class Run:
+    """Model, EMA, optimiser, schedule and RNG states of one training run."""
+
+    def __init__(self, clip: ClipData, config: TrainConfig, seed: int, device: torch.device):
+        self.clip, self.config, self.seed, self.device = clip, config, seed, device
+        self.model_config = ModelConfig(
+            features=clip.codec.width, width=config.width, norm=config.norm, dropout=config.dropout
+        )
+        self.receptive_field = receptive_field(self.model_config)
+        if clip.features.shape[0] < self.receptive_field:
+            raise SinMDMError(
+                f"clip has {clip.features.shape[0]} frames at {config.fps:g} fps, fewer than the "
+                f"model's receptive field of {self.receptive_field} frames"
+            )
+        torch.manual_seed(seed)
+        self.model = Denoiser(self.model_config).to(device)
+        self.ema = copy.deepcopy(self.model).requires_grad_(False) if config.ema else None
+        self.optimizer = torch.optim.AdamW(self.model.parameters(), lr=config.lr, weight_decay=config.weight_decay)
+        self.scheduler = torch.optim.lr_scheduler.LambdaLR(self.optimizer, learning_rate_factor(config))
+        self.diffusion = GaussianDiffusion().to(device)
+        self.generator = torch.Generator().manual_seed(seed)
+        clip_tensor = torch.from_numpy(clip.features.T.copy())
+        self.sampler = BatchSampler(clip_tensor, config, self.generator)
+        self.step = 0
+        self.loss = float("nan")
+        self.elapsed = 0.0
+        self.autocast = config.bf16 and bf16_supported(device)
+
+    # ------------------------------------------------------------- state
+    def state(self) -> dict:
+        state = {
+            "step": self.step,
+            "model": self.model.state_dict(),
+            "optimizer": self.optimizer.state_dict(),
+            "scheduler": self.scheduler.state_dict(),
+            "torch_rng": torch.get_rng_state(),
+            "data_rng": self.generator.get_state(),
+            "loss": self.loss,
+            "elapsed": self.elapsed,
+        }
+        if self.ema is not None:
+            state["ema"] = self.ema.state_dict()
+        if self.device.type == "cuda":
+            state["cuda_rng"] = torch.cuda.get_rng_state()
+        return state
+
+    def load_state(self, state: dict) -> None:
+        try:
+            self.model.load_state_dict(state["model"])
+            if self.ema is not None:
+                self.ema.load_state_dict(state["ema"])
+            self.optimizer.load_state_dict(state["optimizer"])
+            self.scheduler.load_state_dict(state["scheduler"])
+            torch.set_rng_state(state["torch_rng"])
+            self.generator.set_state(state["data_rng"])
+            if self.device.type == "cuda" and "cuda_rng" in state:
+                torch.cuda.set_rng_state(state["cuda_rng"])
+        except (KeyError, RuntimeError, ValueError) as exc:
+            raise SinMDMError(f"checkpoint does not match this run's model ({type(exc).__name__}: {str(exc)[:120]})") from None
+        self.step = int(state["step"])
+        self.loss = float(state.get("loss", float("nan")))
+        self.elapsed = float(state.get("elapsed", 0.0))
+
+    def config_dict(self, finished: bool) -> dict:
+        return {
+            "run_format": RUN_FORMAT,
+            "sinmdm_version": __version__,
+            "clip": self.clip.info,
+            "codec": self.clip.codec.to_dict(),
+            "model": self.model_config.to_dict(),
+            "train": self.config.to_dict(),
+            "seed": self.seed,
+            "device": str(self.device),
+            "bf16": self.autocast,
+            "window": self.sampler.window,
+            "receptive_field": self.receptive_field,
+            "parameters": count_parameters(self.model),
+            "schedule": {"name": "cosine", "timesteps": NUM_TIMESTEPS},
+            "step": self.step,
+            "steps": self.config.steps,
+            "finished": finished,
+            "loss": None if math.isnan(self.loss) else self.loss,
+            "elapsed_seconds": round(self.elapsed, 2),
+            "updated": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+        }
+
+    # -------------------------------------------------------------- train
+    def train_step(self) -> float:
+        batch = self.sampler().to(self.device)
+        t = torch.randint(0, NUM_TIMESTEPS, (batch.shape[0],), generator=self.generator).to(self.device)
+        noise = torch.randn(batch.shape, generator=self.generator).to(self.device)
+        self.model.train()
+        with torch.autocast(device_type=self.device.type, dtype=torch.bfloat16, enabled=self.autocast):
+            loss = self.diffusion.training_loss(self.model, batch, t=t, noise=noise)
+        self.optimizer.zero_grad(set_to_none=True)
+        loss.backward()
+        self.optimizer.step()
+        self.scheduler.step()
+        self.step += 1
+        if self.ema is not None:
+            self._update_ema()
+        return float(loss.detach())
+
+    @torch.no_grad()
+    def _update_ema(self) -> None:
+        decay = min(self.config.ema, (1 + self.step) / (10 + self.step))
+        for ema_param, param in zip(self.ema.parameters(), self.model.parameters()):
+            ema_param.lerp_(param.detach(), 1.0 - decay)
+
+
+def _compatible(previous: dict, run: Run) -> None:
+    """Refuse to resume a run on another clip, codec or configuration."""
+    if previous["clip"]["sha256"] != run.clip.info["sha256"]:
+        raise SinMDMError(f"cannot resume: the run was trained on {previous['clip']['name']} (another file)")
+    if previous["codec"] != json.loads(json.dumps(run.clip.codec.to_dict())):
+        raise SinMDMError("cannot resume: the clip's feature encoding options differ from the run's")
+    before = dict(previous["train"], steps=None)
+    now = dict(json.loads(json.dumps(run.config.to_dict())), steps=None)
+    if before != now:
+        changed = sorted(k for k in before if before.get(k) != now.get(k))
+        raise SinMDMError(f"cannot resume: training configuration differs from the run's ({', '.join(changed)})")
+    if previous["seed"] != run.seed:
+        raise SinMDMError(f"cannot resume: the run used seed {previous['seed']}, not {run.seed}")
+
+
+def _trim_log(run_dir: Path, step: int) -> None:
+    """Drop log lines written after the checkpoint we resume from."""
+    path = run_dir / LOG
+    if not path.exists():
+        return
+    kept = []
+    for line in path.read_text(encoding="utf-8").splitlines():
+        try:
+            if json.loads(line).get("step", 0) <= step:
+                kept.append(line)
+        except json.JSONDecodeError:
+            break  # a line cut by a kill
+    write_text_atomic(path, "".join(k + "\n" for k in kept))
+
+
+def train(
+    clip_path: Path,
+    run_dir: Path,
+    config: TrainConfig,
+    seed: int = 0,
+    device: str = "auto",
+    resume: bool = False,
+    codec_options: dict | None = None,
+    on_progress: Callable[[int, int, float, float], None] | None = None,
+) -> dict:
+    """Train (or resume) a run; returns the final run config."""
+    run_dir = Path(run_dir)
+    codec_options = codec_options or {}
+    if config.steps < 1:
+        raise SinMDMError("--steps must be at least 1")
+    has_run = (run_dir / CONFIG).exists()
+    if has_run and not resume:
+        raise SinMDMError(f"{run_dir} already holds a run: pass --resume to continue it, or choose another --out")
+    clip = load_clip(Path(clip_path), config.fps, codec_options)
+    run = Run(clip, config, seed, resolve_device(device))
+    if has_run:
+        previous = load_config(run_dir)
+        _compatible(previous, run)
+        run.load_state(load_state(run_dir))
+        _trim_log(run_dir, run.step)
+    check_writable_dir(run_dir)
+
+    def checkpoint() -> None:
+        save_run(run_dir, run.config_dict(finished=run.step >= config.steps), run.state())
+
+    if not has_run:
+        checkpoint()
+    log = open(run_dir / LOG, "a", encoding="utf-8")
+    losses: list[float] = []
+    started, started_step = time.perf_counter(), run.step
+    try:
+        while run.step < config.steps:
+            tick = time.perf_counter()
+            losses.append(run.train_step())
+            run.elapsed += time.perf_counter() - tick
+            if run.step % config.log_every == 0 or run.step == config.steps:
+                run.loss = float(np.mean(losses))
+                losses.clear()
+                rate = (run.step - started_step) / max(time.perf_counter() - started, 1e-9)
+                lr = run.optimizer.param_groups[0]["lr"]
+                log.write(json.dumps({"step": run.step, "loss": run.loss, "lr": lr, "it_s": rate,
+                                      "elapsed": round(run.elapsed, 3)}) + "\n")
+                log.flush()
+                if on_progress:
+                    on_progress(run.step, config.steps, run.loss, rate)
+            if run.step % config.checkpoint_every == 0 or run.step == config.steps:
+                checkpoint()
+    except KeyboardInterrupt:
+        checkpoint()
+        raise
+    finally:
+        log.close()
+    if run.step == started_step:
+        checkpoint()  # nothing to train (already at --steps): refresh the config's progress
+    return run.config_dict(finished=run.step >= config.steps)
+
+
+def load_trained_model(run_dir: Path, use_ema: bool = True) -> tuple[torch.nn.Module, dict]:
+    """The run's denoiser (EMA weights when the run kept them) in eval mode, with its config."""
+    config = load_config(run_dir)
+    state = load_state(run_dir)
+    model = Denoiser(ModelConfig.from_dict(config["model"]))
+    weights = state.get("ema") if use_ema and state.get("ema") is not None else state["model"]
+    try:
+        model.load_state_dict(weights)
+    except RuntimeError as exc:
+        raise SinMDMError(f"checkpoint of {run_dir} does not match its config ({str(exc)[:120]})") from None
+    return model.eval(), config

@@ -1,0 +1,44 @@
+"""Shared fixtures: the project's own example clip, the real clips in ../shared/motions,
+and a tiny trained model (trained once per test session, a few seconds)."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+DEMO_CLIP = ROOT / "sinmdm" / "runtime" / "demo" / "stomper.bvh"
+SHARED_MOTIONS = ROOT.parent / "shared" / "motions"
+REAL_CLIPS = sorted(SHARED_MOTIONS.glob("*.bvh")) if SHARED_MOTIONS.is_dir() else []
+# Two real files declare a wrong frame time (1.0 s); they are 30 fps clips.
+WRONG_FRAME_TIME = {"Joe_traj-example.bvh": 30.0, "Joe_Baseball-Milling-Idle-edited-keyframes.bvh": 30.0}
+
+
+def real_clip(name: str) -> Path:
+    path = SHARED_MOTIONS / name
+    if not path.exists():
+        pytest.skip(f"{path} not available")
+    return path
+
+
+def run_cli(*args: str, env: dict | None = None, check: bool = False, cwd: Path | None = None) -> subprocess.CompletedProcess:
+    """Run `sinmdm` or `sinmdm-run` (first arg) as a real process."""
+    exe = Path(sys.executable).parent / args[0]
+    merged = dict(os.environ, **(env or {}))
+    result = subprocess.run([str(exe), *args[1:]], capture_output=True, text=True, env=merged, cwd=cwd, timeout=600)
+    if check and result.returncode != 0:
+        raise AssertionError(f"{args} failed ({result.returncode}):\n{result.stdout}\n{result.stderr}")
+    return result
+
+
+@pytest.fixture
+def no_torch_env(tmp_path: Path) -> dict:
+    """An environment in which `import torch` fails."""
+    blocker = tmp_path / "block_torch"
+    (blocker / "torch").mkdir(parents=True)
+    (blocker / "torch" / "__init__.py").write_text("raise ImportError('torch is blocked in this test')\n")
+    return {"PYTHONPATH": str(blocker)}
