@@ -42,3 +42,22 @@ def no_torch_env(tmp_path: Path) -> dict:
     (blocker / "torch").mkdir(parents=True)
     (blocker / "torch" / "__init__.py").write_text("raise ImportError('torch is blocked in this test')\n")
     return {"PYTHONPATH": str(blocker)}
+
+
+TINY_TRAIN_ARGS = ["--width", "32", "--batch", "4", "--crop", "48", "--checkpoint-every", "5"]
+
+
+@pytest.fixture(scope="session")
+def tiny_run(tmp_path_factory) -> Path:
+    """A real run on the demo clip: a width-32 denoiser trained for 10 steps."""
+    run_dir = tmp_path_factory.mktemp("runs") / "tiny"
+    run_cli("sinmdm", "train", str(DEMO_CLIP), "--out", str(run_dir), "--steps", "10", *TINY_TRAIN_ARGS, check=True)
+    return run_dir
+
+
+@pytest.fixture(scope="session")
+def tiny_model(tiny_run, tmp_path_factory) -> Path:
+    """The tiny run exported at its training window (48 frames)."""
+    out = tmp_path_factory.mktemp("models") / "tiny.onnx"
+    run_cli("sinmdm", "export", str(tiny_run), "--out", str(out), check=True)
+    return out.with_name("tiny_w48.onnx")

@@ -130,6 +130,15 @@ def test_group_norm_equals_torch_group_norm(frames):
     torch.testing.assert_close(ours(x), reference(x), atol=1e-5, rtol=1e-5)
 
 
+def test_group_norm_folds_the_time_modulation():
+    ours, reference = GroupNorm(8, 32), nn.GroupNorm(8, 32, eps=1e-5)
+    randomise_(ours, seed=5, scale=1.0)
+    reference.load_state_dict(ours.state_dict())
+    x, scale, shift = torch.randn(3, 32, 9) * 3, torch.randn(3, 32), torch.randn(3, 32)
+    expected = reference(x) * (1 + scale[:, :, None]) + shift[:, :, None]
+    torch.testing.assert_close(ours(x, scale, shift), expected, atol=1e-5, rtol=1e-5)
+
+
 def test_per_frame_group_norm_normalises_each_frame_on_its_own():
     ours, reference = GroupNorm(8, 32, per_frame=True), nn.GroupNorm(8, 32, eps=1e-5)
     randomise_(ours, seed=4, scale=1.0)
@@ -215,6 +224,7 @@ def test_receptive_field_is_exact_with_per_frame_norm():
     assert torch.equal(inside, sensitivity > 0)
 
 
+@pytest.mark.filterwarnings("ignore:`torch.jit.trace")
 def test_trace_generalises_across_lengths_without_warnings():
     model = randomise_(Denoiser(tiny_config()), scale=0.2).eval()
     with warnings.catch_warnings():
@@ -256,6 +266,16 @@ def test_training_loss_is_plain_mse_of_the_x0_prediction():
         loss = diffusion.training_loss(model, x0, t=t, noise=noise)
         expected = ((model(diffusion.q_sample(x0, t, noise), t) - x0) ** 2).mean()
     torch.testing.assert_close(loss, expected)
+
+
+def test_training_loss_backpropagates_under_bf16_autocast():
+    model = randomise_(Denoiser(tiny_config()), scale=0.2)
+    x0 = torch.randn(4, 6, 16)
+    with torch.autocast("cpu", dtype=torch.bfloat16):
+        loss = GaussianDiffusion().training_loss(model, x0, generator=torch.Generator().manual_seed(0))
+    loss.backward()
+    assert loss.dtype == torch.float32 and torch.isfinite(loss)
+    assert all(torch.isfinite(p.grad).all() for p in model.parameters())
 
 
 def test_training_a_tiny_model_lowers_the_loss():

@@ -114,6 +114,37 @@ def info(
     console.print(table)
 
 
+@app.command()
+def export(
+    run_dir: Path = typer.Argument(..., help="A finished training run directory."),
+    out: Path = typer.Option(..., "--out", "-o", help="Output name: NAME.onnx becomes NAME_w<window>.onnx."),
+    window: Optional[list[int]] = typer.Option(None, "--window", "-w", help="Window length(s) in frames (default: the training length)."),
+    opset: int = typer.Option(18, "--opset", help="ONNX opset: 18 (default) or 17."),
+    force: bool = typer.Option(False, "--force", help="Overwrite existing files."),
+    as_json: bool = typer.Option(False, "--json", help="Print a JSON summary."),
+) -> None:
+    """Export the denoiser to ONNX, one verified graph per window length."""
+    _require_torch()
+    from ..export.onnx_export import export_run
+
+    results = export_run(run_dir, out, windows=window or None, opset=opset, force=force,
+                         on_warning=lambda text: console.print(f"[yellow]warning:[/yellow] {text}"))
+    if as_json:
+        print_json([{"path": str(r.path), "window": r.window, "max_abs_diff": r.max_abs_diff, "opset": r.opset,
+                     "ir_version": r.ir_version, "bytes": r.bytes, "ops": r.ops} for r in results])
+        return
+    for r in results:
+        console.print(f"wrote [bold]{r.path}[/bold]: window {r.window}, opset {r.opset}, IR {r.ir_version}, "
+                      f"{r.bytes / 1e6:.1f} MB, parity with torch {r.max_abs_diff:.1e}")
+
+
+def _register_optional_commands() -> None:
+    from .evaluate import register as register_eval
+
+    register_eval(app)
+
+
+_register_optional_commands()
 main = run_app(app)
 
 if __name__ == "__main__":

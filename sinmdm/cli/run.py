@@ -11,6 +11,7 @@ from rich.table import Table
 from rich.tree import Tree
 
 from ..runtime.errors import SinMDMError
+from ..runtime.sampler import DEFAULT_STEPS as DEFAULT_STEPS_CLI
 from .common import console, print_json, run_app
 
 app = typer.Typer(
@@ -136,6 +137,90 @@ def convert(
             console.print(f"round-trip joint position error: {summary['max_position_error_of_size']:.2e} of skeleton size")
 
 
+ModelArgument = typer.Argument(None, help="Model .onnx file(s), one per window (default: the bundled demo model).")
+
+
+def _progress(total_label: str):
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+
+    return Progress(TextColumn(f"[bold]{total_label}[/bold]"), BarColumn(), MofNCompleteColumn(),
+                    TimeElapsedColumn(), TimeRemainingColumn(), console=console, transient=True)
+
+
+@app.command()
+def sample(
+    models: Optional[list[Path]] = ModelArgument,
+    seconds: Optional[float] = typer.Option(None, "--seconds", help="Length in seconds."),
+    frames: Optional[int] = typer.Option(None, "--frames", help="Length in frames (default: twice the window, or 10 s)."),
+    count: int = typer.Option(1, "--count", "-n", help="How many motions (sample i uses seed + i)."),
+    seed: int = typer.Option(0, "--seed"),
+    sampler: str = typer.Option("ddpm", "--sampler", help="ddpm (ancestral) or ddim (deterministic with --eta 0)."),
+    steps: int = typer.Option(DEFAULT_STEPS_CLI, "--steps", help="Denoising steps (1000 = the paper's full chain)."),
+    eta: float = typer.Option(0.0, "--eta", help="DDIM noise (0 = deterministic)."),
+    hop: Optional[int] = typer.Option(None, "--hop", help="Frames between overlapping windows (default: half a window)."),
+    out: Path = typer.Option(Path("sinmdm_out"), "--out", "-o", help="Output directory."),
+    name: str = typer.Option("sample", "--name", help="File name prefix."),
+    fmt: str = typer.Option("bvh", "--format", help="bvh or glb (glb needs the preview extra)."),
+    npz: bool = typer.Option(False, "--npz", help="Also write features and joint positions as .npz."),
+    preview: bool = typer.Option(False, "--preview", help="Also write a GIF preview (needs the preview extra)."),
+    threads: Optional[int] = typer.Option(None, "--threads", help="onnxruntime threads (default: all cores)."),
+    force: bool = typer.Option(False, "--force", help="Allow very long motions and overwrite existing files."),
+    as_json: bool = typer.Option(False, "--json", help="Print a JSON summary on stdout."),
+) -> None:
+    """Generate new motions from a trained model and write them as BVH."""
+    from ..runtime.generate import GenerationRequest, generate, write_outputs
+    from ..runtime.model import load_model
+
+    model = load_model(models or None, threads=threads)
+    length = _length(model, seconds, frames, force)
+    request = GenerationRequest(frames=length, count=count, seed=seed, sampler=sampler, steps=steps, eta=eta, hop=hop)
+    with _progress(f"sampling {count} x {length} frames") as progress:
+        task = progress.add_task("sample", total=steps if steps else len(model.alphas_cumprod))
+        result = generate(model, request, progress=lambda done, total: progress.update(task, completed=done, total=total))
+    written = write_outputs(model, result, out, name=name, fmt=fmt, npz=npz, preview=preview, force=force)
+    summary = {
+        "model": [str(d.path) for d in model.denoisers.values()],
+        "frames": length, "fps": model.codec.fps, "seconds": length / model.codec.fps,
+        "count": count, "seed": seed, "sampler": sampler, "steps": steps,
+        "elapsed_seconds": round(result.seconds, 3), "files": [str(p) for p in written],
+    }
+    if as_json:
+        print_json(summary)
+    else:
+        console.print(f"wrote {len(written)} file(s) to [bold]{out}[/bold]: {count} x {length} frames "
+                      f"({length / model.codec.fps:.1f} s at {model.codec.fps:g} fps) in {result.seconds:.2f} s")
+
+
+MAX_SECONDS = 3600.0
+
+
+def _length(model, seconds: Optional[float], frames: Optional[int], force: bool) -> int:
+    if seconds is not None and frames is not None:
+        raise SinMDMError("give --seconds or --frames, not both")
+    if seconds is not None:
+        if not seconds > 0:
+            raise SinMDMError("--seconds must be positive")
+        length = int(round(seconds * model.codec.fps))
+    elif frames is not None:
+        length = frames
+    else:
+        length = int(round(10 * model.codec.fps))
+    if length < 1:
+        raise SinMDMError("the length must be at least 1 frame")
+    if length > MAX_SECONDS * model.codec.fps and not force:
+        raise SinMDMError(f"{length} frames is over {MAX_SECONDS / 60:.0f} minutes; pass --force if you mean it")
+    return length
+
+
+def _register_optional_commands() -> None:
+    from .apps import register as register_apps
+    from .preview_commands import register as register_preview
+
+    register_apps(app)
+    register_preview(app)
+
+
+_register_optional_commands()
 main = run_app(app)
 
 if __name__ == "__main__":

@@ -67,6 +67,7 @@ def learning_rate_factor(config: TrainConfig) -> Callable[[int], float]:
 class ClipData:
     codec: MotionCodec
     features: np.ndarray  # (T, F)
+    start: np.ndarray  # (x, z) of the trajectory joint at frame 0, metres
     info: dict
 
 
@@ -83,7 +84,8 @@ def load_clip(path: Path, fps: float, codec_options: dict) -> ClipData:
         "source_frames": bvh.frames,
         "source_fps": codec_options.get("source_fps") or bvh.fps,
     }
-    return ClipData(codec, features, info)
+    start = codec.start_position(bvh, source_fps=codec_options.get("source_fps"))
+    return ClipData(codec, features, start, info)
 
 
 class Run:
@@ -105,7 +107,7 @@ class Run:
         self.ema = copy.deepcopy(self.model).requires_grad_(False) if config.ema else None
         self.optimizer = torch.optim.AdamW(self.model.parameters(), lr=config.lr, weight_decay=config.weight_decay)
         self.scheduler = torch.optim.lr_scheduler.LambdaLR(self.optimizer, learning_rate_factor(config))
-        self.diffusion = GaussianDiffusion().to(device)
+        self.diffusion = GaussianDiffusion()
         self.generator = torch.Generator().manual_seed(seed)
         clip_tensor = torch.from_numpy(clip.features.T.copy())
         self.sampler = BatchSampler(clip_tensor, config, self.generator)
@@ -155,6 +157,7 @@ class Run:
             "sinmdm_version": __version__,
             "clip": self.clip.info,
             "codec": self.clip.codec.to_dict(),
+            "start_position": [float(v) for v in self.clip.start],
             "model": self.model_config.to_dict(),
             "train": self.config.to_dict(),
             "seed": self.seed,

@@ -1,0 +1,69 @@
+"""Render bench/results/*.json as the markdown tables of BENCHMARKS.md.
+
+    python bench/report.py > /tmp/tables.md
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+RESULTS = Path(__file__).resolve().parent / "results"
+PAPER_ROWS = [
+    ("paper: SinMDM, Mixamo mean (10 clips)", 94.3, 1.42, 1.00, 0.13, 0.03),
+    ("paper: SinMDM, Gangnam style", 98.1, 1.55, 1.12, None, None),
+    ("paper: GANimator, Mixamo mean", 94.3, 1.24, 1.17, 0.09, 0.13),
+    ("notes: CPU pilot, 64-frame windows, 50 steps", 87.9, 1.13, 0.87, 0.12, None),
+]
+
+
+def fmt(value, digits=2) -> str:
+    return "-" if value is None else f"{value:.{digits}f}"
+
+
+def quality_table() -> str:
+    path = RESULTS / "quality.json"
+    if not path.exists():
+        return "(no quality results yet)\n"
+    lines = [
+        "| clip | preset | train it | train time | eval protocol | steps | samples | coverage % | global div | local div | inter div | intra div diff | s per sample |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for entry in json.loads(path.read_text()):
+        for row in entry["rows"]:
+            lines.append(
+                f"| {entry['clip']} | {entry['preset']} | {entry['train_steps']} | {entry['train_wall_seconds'] / 60:.1f} min "
+                f"| {row['eval_preset']} | {row['steps']} | {row['samples']} x {row['frames']} f | {fmt(row['coverage'], 1)} "
+                f"| {fmt(row['global_diversity'])} | {fmt(row['local_diversity'])} | {fmt(row['inter_diversity'])} "
+                f"| {fmt(row['intra_diversity_diff'])} | {row['sampling_seconds'] / row['samples']:.2f} |"
+            )
+    for name, cov, glob, local, inter, intra in PAPER_ROWS:
+        lines.append(f"| {name} | | | | | 1000 | 20 | {fmt(cov, 1)} | {fmt(glob)} | {fmt(local)} | {fmt(inter)} | {fmt(intra)} | |")
+    return "\n".join(lines) + "\n"
+
+
+def speed_table() -> str:
+    path = RESULTS / "sampling_speed.json"
+    if not path.exists():
+        return "(no sampling-speed results yet)\n"
+    data = json.loads(path.read_text())
+    lines = ["| measurement | frames | steps | result |", "|---|---|---|---|"]
+    for row in data["rows"]:
+        kind = row["kind"]
+        if kind in ("steps", "length"):
+            result = f"{row['seconds_per_sample']:.3f} s per sample"
+        elif kind == "crowd":
+            result = f"{row['seconds_per_sample']:.3f} s per sample (crowd of {row['count']} in one batch)"
+        elif kind == "backend":
+            result = f"onnxruntime {row['onnxruntime']:.3f} s, torch eager {row['torch_eager']:.3f} s ({row['speedup']:.2f}x)"
+        else:
+            result = f"peak RSS {row['peak_rss_mb']:.0f} MB, {row['wall_seconds']:.0f} s wall (whole process)"
+        lines.append(f"| {kind} | {row['frames']} | {row['steps']} | {result} |")
+    return "\n".join(lines) + "\n"
+
+
+if __name__ == "__main__":
+    print("## Quality\n")
+    print(quality_table())
+    print("## Sampling speed\n")
+    print(speed_table())

@@ -1,0 +1,389 @@
+"""BVH -> glTF 2.0 binary (GLB) as a skinned skeleton animation, and back.
+
+Layout of a written file:
+- one node per BVH joint (node name = joint name, BVH hierarchy, rest
+  translation = OFFSET in metres, rest rotation identity), then one leaf node
+  per End Site named "<parent>_end" (extras {"bvh_end_site": true}); a
+  skeleton with several ROOTs gets one plain node "skeleton" above them;
+- a skin listing all of those nodes, with the inverse bind matrices of the rest
+  pose, so engines import an armature;
+- a skinned mesh of one octahedral "bone" per segment, weighted fully to the
+  segment's parent joint, so the skeleton is visible without an armature view;
+- one animation: a rotation channel (x, y, z, w) for every joint and a
+  translation channel for every joint with position channels, LINEAR, at the
+  times k / fps.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..runtime.animation import animation_from_bvh, nominal_fps, rest_positions
+from ..runtime.atomic import write_bytes_atomic
+from ..runtime.bvh import BVH, Skeleton
+from ..runtime.errors import SinMDMError
+from ..runtime.features import unit_scale
+from ..runtime.kinematics import forward_kinematics
+from ..runtime.rotations import quat_fix_sign, quat_normalize, quat_to_matrix
+from . import CLIP_COLOURS, import_extra
+
+END_SITE_MARK = "bvh_end_site"
+FLOAT, UNSIGNED_BYTE, UNSIGNED_SHORT, UNSIGNED_INT = 5126, 5121, 5123, 5125
+ARRAY_BUFFER, ELEMENT_ARRAY_BUFFER = 34962, 34963
+BONE_WIDTH = 0.08  # octahedron radius as a fraction of the bone's length
+_COMPONENTS = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT4": 16}
+_DTYPES = {5120: np.int8, 5121: np.uint8, 5122: np.int16, 5123: np.uint16, 5125: np.uint32, 5126: np.float32}
+_NORMALIZED_MAX = {5120: 127.0, 5121: 255.0, 5122: 32767.0, 5123: 65535.0}
+
+
+# --------------------------------------------------------------------------- writing
+
+
+def write_glb(bvh: BVH, path: str | os.PathLike, units: str | float = "auto", fps: float | None = None) -> Path:
+    """Write `bvh` as a GLB file (atomically). `fps` overrides the clip's frame rate."""
+    path = Path(path)
+    write_bytes_atomic(path, bvh_to_glb(bvh, units=units, fps=fps))
+    return path
+
+
+def bvh_to_glb(bvh: BVH, units: str | float = "auto", fps: float | None = None) -> bytes:
+    """The GLB bytes of a clip: skeleton, skin, bone mesh and animation, in metres."""
+    gltf_module = import_extra("pygltflib")
+    if bvh.frames == 0:
+        raise SinMDMError(f"{bvh.path or 'the clip'} has no frames to export")
+    if fps is not None and not (np.isfinite(fps) and fps > 0):
+        raise SinMDMError(f"frame rate must be a number > 0, got {fps}")
+    skeleton = bvh.skeleton
+    scale = unit_scale(skeleton, units)
+    rate = float(fps) if fps is not None else nominal_fps(bvh.frame_time)
+    animation = animation_from_bvh(bvh)
+    builder = _GLBBuilder(gltf_module)
+
+    names = _node_names(skeleton)
+    joint_count = skeleton.num_joints
+    end_parents = [p for p, _ in skeleton.end_sites]
+    end_offsets = np.array([np.zeros(3) if o is None else o for _, o in skeleton.end_sites]).reshape(-1, 3)
+    point_parents = np.concatenate([skeleton.parents, end_parents]).astype(np.int64)
+    local_rest = np.concatenate([skeleton.offsets, end_offsets]) * scale
+    rest_world = np.concatenate([rest_positions(skeleton), rest_positions(skeleton)[end_parents] + end_offsets]) * scale
+
+    nodes = []
+    for k, name in enumerate(names):
+        node = gltf_module.Node(name=name, translation=[float(v) for v in local_rest[k]])
+        node.children = [int(c) for c in np.flatnonzero(point_parents == k)]
+        if k >= joint_count:
+            node.extras = {END_SITE_MARK: True}
+        nodes.append(node)
+
+    # Rest rotations are identity, so each inverse bind matrix is a translation
+    # by minus the rest position (column-major, as glTF stores MAT4).
+    inverse_bind = np.tile(np.eye(4), (len(names), 1, 1))
+    inverse_bind[:, :3, 3] = -rest_world
+    skin = gltf_module.Skin(
+        name="skeleton",
+        joints=list(range(len(names))),
+        inverseBindMatrices=builder.accessor(np.transpose(inverse_bind, (0, 2, 1)), "MAT4"),
+    )
+    roots = skeleton.roots
+    if len(roots) > 1:
+        # glTF wants all joints of a skin under one node; BVH allows several ROOTs.
+        nodes.append(gltf_module.Node(name="skeleton", children=list(roots)))
+        roots = [len(nodes) - 1]
+    skin.skeleton = roots[0]
+
+    mesh_node = len(nodes)
+    nodes.append(gltf_module.Node(name="bones", mesh=0, skin=0))
+    mesh = _bone_mesh(gltf_module, builder, rest_world, point_parents)
+
+    times = np.arange(animation.frames, dtype=np.float64) / rate
+    time_accessor = builder.accessor(times.astype(np.float32), "SCALAR", with_bounds=True)
+    samplers, channels = [], []
+
+    def add_channel(node: int, path: str, values: np.ndarray, kind: str) -> None:
+        output = builder.accessor(values, kind)
+        samplers.append(gltf_module.AnimationSampler(input=time_accessor, output=output, interpolation="LINEAR"))
+        target = gltf_module.AnimationChannelTarget(node=node, path=path)
+        channels.append(gltf_module.AnimationChannel(sampler=len(samplers) - 1, target=target))
+
+    # Consecutive keys on the same hemisphere, so interpolation takes the short way.
+    rotations = quat_fix_sign(quat_normalize(animation.rotations), axis=0)
+    for j in range(joint_count):
+        add_channel(j, "rotation", rotations[:, j][:, [1, 2, 3, 0]], "VEC4")
+        if skeleton.position_channels(j):
+            add_channel(j, "translation", animation.translations[:, j] * scale, "VEC3")
+
+    gltf = gltf_module.GLTF2(
+        asset=gltf_module.Asset(version="2.0", generator="sinmdm"),
+        scene=0,
+        scenes=[gltf_module.Scene(name=Path(bvh.path).stem if bvh.path else "motion", nodes=[*roots, mesh_node])],
+        nodes=nodes,
+        skins=[skin],
+        meshes=[mesh],
+        materials=[gltf_module.Material(
+            name="bone",
+            pbrMetallicRoughness=gltf_module.PbrMetallicRoughness(
+                baseColorFactor=[*_linear_rgb(CLIP_COLOURS[0]), 1.0], metallicFactor=0.0, roughnessFactor=0.7),
+        )],
+        animations=[gltf_module.Animation(
+            name=Path(bvh.path).stem if bvh.path else "motion",
+            samplers=samplers,
+            channels=channels,
+            extras={"fps": rate, "frames": animation.frames, "metres_per_unit": scale},
+        )],
+    )
+    return builder.finish(gltf)
+
+
+class _GLBBuilder:
+    """Collects arrays into one binary buffer, one buffer view and accessor each."""
+
+    def __init__(self, gltf_module: Any):
+        self.gltf = gltf_module
+        self.chunks: list[bytes] = []
+        self.size = 0
+        self.views: list[Any] = []
+        self.accessors: list[Any] = []
+
+    def accessor(self, values: np.ndarray, kind: str, target: int | None = None, with_bounds: bool = False) -> int:
+        values = np.ascontiguousarray(values)
+        if values.dtype == np.float64:
+            values = values.astype(np.float32)
+        component = {np.dtype(np.float32): FLOAT, np.dtype(np.uint8): UNSIGNED_BYTE,
+                     np.dtype(np.uint16): UNSIGNED_SHORT, np.dtype(np.uint32): UNSIGNED_INT}[values.dtype]
+        data = values.tobytes()
+        self.views.append(self.gltf.BufferView(buffer=0, byteOffset=self.size, byteLength=len(data), target=target))
+        self.chunks.append(data + b"\0" * (-len(data) % 4))
+        self.size += len(self.chunks[-1])
+        width = _COMPONENTS[kind]
+        flat = values.reshape(-1, width)
+        accessor = self.gltf.Accessor(bufferView=len(self.views) - 1, componentType=component, count=len(flat), type=kind)
+        if with_bounds:
+            accessor.min = flat.min(axis=0).tolist()
+            accessor.max = flat.max(axis=0).tolist()
+        self.accessors.append(accessor)
+        return len(self.accessors) - 1
+
+    def finish(self, gltf: Any) -> bytes:
+        blob = b"".join(self.chunks)
+        gltf.accessors = self.accessors
+        gltf.bufferViews = self.views
+        gltf.buffers = [self.gltf.Buffer(byteLength=len(blob))]
+        gltf.set_binary_blob(blob)
+        return b"".join(gltf.save_to_bytes())
+
+
+def _node_names(skeleton: Skeleton) -> list[str]:
+    """Joint names, then a unique "<parent>_end" for each End Site."""
+    names = list(skeleton.names)
+    taken = set(names)
+    for parent, _ in skeleton.end_sites:
+        base = f"{skeleton.names[parent]}_end"
+        name, k = base, 2
+        while name in taken:
+            name, k = f"{base}{k}", k + 1
+        taken.add(name)
+        names.append(name)
+    return names
+
+
+def _linear_rgb(colour: str) -> list[float]:
+    srgb = np.array([int(colour[k:k + 2], 16) / 255 for k in (1, 3, 5)])
+    return np.where(srgb <= 0.04045, srgb / 12.92, ((srgb + 0.055) / 1.055) ** 2.4).round(4).tolist()
+
+
+def _bone_mesh(gltf_module: Any, builder: _GLBBuilder, rest_world: np.ndarray, parents: np.ndarray) -> Any:
+    """An octahedron from each point's parent to the point, in the rest pose."""
+    positions, joints, indices = [], [], []
+    pairs = [(int(parents[k]), k) for k in range(len(parents)) if parents[k] >= 0]
+    pairs = [(h, t) for h, t in pairs if np.linalg.norm(rest_world[t] - rest_world[h]) > 1e-6]
+    if not pairs:  # a skeleton without bones still gets a small marker at its root
+        size = 0.05
+        heads = [rest_world[0]]
+        tails = [rest_world[0] + np.array([0.0, size, 0.0])]
+        owners = [0]
+    else:
+        heads = [rest_world[h] for h, _ in pairs]
+        tails = [rest_world[t] for _, t in pairs]
+        owners = [h for h, _ in pairs]
+    for head, tail, owner in zip(heads, tails, owners):
+        axis = tail - head
+        length = float(np.linalg.norm(axis))
+        d = axis / length
+        u = np.cross(d, [0.0, 1.0, 0.0] if abs(d[1]) < 0.9 else [1.0, 0.0, 0.0])
+        u /= np.linalg.norm(u)
+        v = np.cross(d, u)  # (u, v, d) is right-handed, so the winding below faces outwards
+        middle = head + d * length * 0.15
+        radius = length * BONE_WIDTH
+        ring = [middle + radius * e for e in (u, v, -u, -v)]
+        base = len(positions)
+        positions += [head, *ring, tail]
+        joints += [owner] * 6
+        for k in range(4):
+            a, b = base + 1 + k, base + 1 + (k + 1) % 4
+            indices += [base, b, a, base + 5, a, b]
+    positions_array = np.array(positions, dtype=np.float32)
+    joint_type = np.uint8 if len(rest_world) <= 256 else np.uint16
+    joints_array = np.zeros((len(joints), 4), dtype=joint_type)
+    joints_array[:, 0] = joints
+    weights_array = np.zeros((len(joints), 4), dtype=np.float32)
+    weights_array[:, 0] = 1.0
+    index_type = np.uint16 if len(positions) < 65536 else np.uint32
+    attributes = gltf_module.Attributes(
+        POSITION=builder.accessor(positions_array, "VEC3", ARRAY_BUFFER, with_bounds=True),
+        JOINTS_0=builder.accessor(joints_array, "VEC4", ARRAY_BUFFER),
+        WEIGHTS_0=builder.accessor(weights_array, "VEC4", ARRAY_BUFFER),
+    )
+    primitive = gltf_module.Primitive(
+        attributes=attributes,
+        indices=builder.accessor(np.array(indices, dtype=index_type), "SCALAR", ELEMENT_ARRAY_BUFFER),
+        material=0,
+    )
+    return gltf_module.Mesh(name="bones", primitives=[primitive])
+
+
+# --------------------------------------------------------------------------- reading
+
+
+def read_glb(path: str | os.PathLike) -> dict:
+    """The skeleton animation of a GLB file with a skin.
+
+    Returns names, parents (-1 for roots; parents precede children), end_sites
+    [(parent index, offset in metres)], frames, fps, times (T,), rotations
+    (T, J, 4; w, x, y, z, the package's order), translations (T, J, 3) and world
+    positions (T, J, 3), in metres. Joints are the skin's joints except the
+    nodes this module marks as End Sites; channels a joint lacks hold its rest
+    transform."""
+    gltf_module = import_extra("pygltflib")
+    path = Path(path)
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(4)
+    except OSError as exc:
+        raise SinMDMError(f"cannot read {path}: {exc.strerror or exc}") from None
+    if head != b"glTF":
+        raise SinMDMError(f"{path} is not a GLB file")
+    try:
+        gltf = gltf_module.GLTF2().load_binary(str(path))
+    except Exception as exc:  # pygltflib raises assorted errors for damaged files
+        raise SinMDMError(f"{path}: damaged GLB file ({exc})") from None
+    if gltf is None or not gltf.skins:
+        raise SinMDMError(f"{path} has no skin (no skeleton to read)")
+    blob = gltf.binary_blob() or b""
+
+    def accessor(index: int) -> np.ndarray:
+        return _read_accessor(gltf, blob, index, path)
+
+    skin_nodes = set(gltf.skins[0].joints)
+    parent_of = {child: k for k, node in enumerate(gltf.nodes) for child in node.children or []}
+    order = [k for k in _depth_first(gltf, parent_of) if k in skin_nodes]
+    end_nodes = {k for k in order if (gltf.nodes[k].extras or {}).get(END_SITE_MARK)}
+    joint_nodes = [k for k in order if k not in end_nodes]
+    index_of = {node: j for j, node in enumerate(joint_nodes)}
+
+    def joint_parent(node: int) -> int:
+        parent = parent_of.get(node)
+        while parent is not None and parent not in index_of:
+            parent = parent_of.get(parent)
+        return -1 if parent is None else index_of[parent]
+
+    names = [gltf.nodes[k].name or f"joint{j}" for j, k in enumerate(joint_nodes)]
+    parents = np.array([joint_parent(k) for k in joint_nodes], dtype=np.int64)
+    rest_rotation = np.array([_node_rotation(gltf.nodes[k], path) for k in joint_nodes]).reshape(-1, 4)
+    rest_translation = np.array([_node_translation(gltf.nodes[k]) for k in joint_nodes]).reshape(-1, 3)
+    end_sites = [(joint_parent(k), _node_translation(gltf.nodes[k])) for k in sorted(end_nodes, key=order.index)]
+
+    channels = []
+    animation = gltf.animations[0] if gltf.animations else None
+    if animation is not None:
+        for channel in animation.channels:
+            node, target = channel.target.node, channel.target.path
+            if node in index_of and target in ("rotation", "translation"):
+                sampler = animation.samplers[channel.sampler]
+                channels.append((index_of[node], target, accessor(sampler.input).reshape(-1).astype(np.float64),
+                                 accessor(sampler.output).astype(np.float64), sampler.interpolation or "LINEAR"))
+    times = max((c[2] for c in channels), key=len, default=np.zeros(1))
+    frames = len(times)
+    fps = (animation.extras or {}).get("fps") if animation is not None else None
+    if fps is None:
+        fps = nominal_fps(float(np.median(np.diff(times)))) if frames > 1 else 30.0
+
+    rotations = np.broadcast_to(rest_rotation, (frames, len(joint_nodes), 4)).copy()
+    translations = np.broadcast_to(rest_translation, (frames, len(joint_nodes), 3)).copy()
+    for joint, target, keys, values, interpolation in channels:
+        sampled = _sample(times, keys, values, interpolation)
+        if target == "rotation":
+            rotations[:, joint] = quat_normalize(sampled[:, [3, 0, 1, 2]])
+        else:
+            translations[:, joint] = sampled
+    _, positions = forward_kinematics(quat_to_matrix(rotations), translations, parents)
+    return {
+        "names": names,
+        "parents": parents,
+        "end_sites": end_sites,
+        "frames": frames,
+        "fps": float(fps),
+        "times": times,
+        "rotations": rotations,
+        "translations": translations,
+        "positions": positions,
+    }
+
+
+def _depth_first(gltf: Any, parent_of: dict[int, int]) -> list[int]:
+    """Node indices with every parent before its children."""
+    scene_roots = [k for k in range(len(gltf.nodes)) if k not in parent_of]
+    order, stack = [], list(reversed(scene_roots))
+    while stack:
+        node = stack.pop()
+        order.append(node)
+        stack.extend(reversed(gltf.nodes[node].children or []))
+    return order
+
+
+def _node_rotation(node: Any, path: Path) -> list[float]:
+    if node.matrix is not None:
+        raise SinMDMError(f"{path}: joint {node.name!r} uses a matrix transform; only TRS nodes are supported")
+    x, y, z, w = node.rotation or [0.0, 0.0, 0.0, 1.0]
+    return [w, x, y, z]
+
+
+def _node_translation(node: Any) -> np.ndarray:
+    return np.array(node.translation or [0.0, 0.0, 0.0], dtype=np.float64)
+
+
+def _read_accessor(gltf: Any, blob: bytes, index: int, path: Path) -> np.ndarray:
+    accessor = gltf.accessors[index]
+    if accessor.sparse is not None or accessor.bufferView is None:
+        raise SinMDMError(f"{path}: sparse or empty accessors are not supported")
+    view = gltf.bufferViews[accessor.bufferView]
+    if view.buffer != 0 or gltf.buffers[0].uri is not None:
+        raise SinMDMError(f"{path}: external buffers are not supported")
+    dtype = np.dtype(_DTYPES[accessor.componentType])
+    width = _COMPONENTS[accessor.type]
+    element = dtype.itemsize * width
+    stride = view.byteStride or element
+    start = (view.byteOffset or 0) + (accessor.byteOffset or 0)
+    end = start + stride * (accessor.count - 1) + element
+    if accessor.count and end > (view.byteOffset or 0) + view.byteLength or end > len(blob):
+        raise SinMDMError(f"{path}: accessor {index} reaches past its buffer")
+    rows = np.ndarray((accessor.count, width), dtype=dtype.newbyteorder("<"), buffer=blob, offset=start,
+                      strides=(stride, dtype.itemsize))
+    values = rows.astype(np.float64)
+    if accessor.normalized and accessor.componentType in _NORMALIZED_MAX:
+        values = np.maximum(values / _NORMALIZED_MAX[accessor.componentType], -1.0)
+    return values
+
+
+def _sample(times: np.ndarray, keys: np.ndarray, values: np.ndarray, interpolation: str) -> np.ndarray:
+    """A channel's values at `times` (rotations come back unnormalised)."""
+    if interpolation == "CUBICSPLINE":
+        values = values.reshape(len(keys), 3, -1)[:, 1]  # (in-tangent, value, out-tangent): keep the values
+    if len(keys) == len(times) and np.array_equal(keys, times):
+        return values
+    if interpolation == "STEP":
+        return values[np.clip(np.searchsorted(keys, times, side="right") - 1, 0, len(keys) - 1)]
+    return np.stack([np.interp(times, keys, values[:, k]) for k in range(values.shape[1])], axis=1)

@@ -1,0 +1,215 @@
+"""Editing at inference time with the trained model unchanged (reference notes,
+section 5): in-betweening, expansion, keyframes, joint and trajectory control,
+harmonization (whole clip = style transfer, or a pasted portion). Each `plan_*`
+turns a reference clip and options into what the sampler needs: a Guide, the
+output length, and the root's start position."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from .bvh import read_bvh
+from .errors import SinMDMError
+from .animation import Animation, animation_from_bvh, nominal_fps
+from .features import build_codec, check_same_skeleton, skeleton_size
+from .generate import GenerationRequest, GenerationResult, generate
+from .masks import feature_channels, frame_ramp, joint_names, trajectory_channels
+from .model import MotionModel
+from .sampler import Guide
+
+INBETWEEN_KEEP = 0.25
+INBETWEEN_RAMP = 10
+EXPAND_SHARE = 0.15
+EXPAND_RAMP = 6
+HARMONIZE_BORDER = 10
+
+
+@dataclass
+class Reference:
+    path: Path
+    features: np.ndarray  # (frames, F) at the model's frame rate
+    start: np.ndarray  # (x, z) metres
+
+    @property
+    def frames(self) -> int:
+        return self.features.shape[0]
+
+
+@dataclass
+class Plan:
+    guide: Guide
+    frames: int
+    start: np.ndarray
+    fix_root: tuple[int, int] | None = None  # (gap start, gap stop): land the kept end on the reference's path
+    reference: Reference | None = None
+
+
+def _matching_scale(model: MotionModel, skeleton) -> float | None:
+    """The reference's own metres-per-unit when it was saved in other units than the
+    training clip (same joints, offsets scaled), else None."""
+    ratio = skeleton_size(skeleton) / skeleton_size(model.codec.skeleton)
+    if 0.5 < ratio < 2.0:
+        return None
+    return model.codec.scale / ratio
+
+
+def load_reference(model: MotionModel, path: str | Path, source_fps: float | None = None) -> Reference:
+    """A reference clip on the model's skeleton (names and hierarchy checked), at the
+    model's frame rate and units."""
+    bvh = read_bvh(path)
+    check_same_skeleton(model.codec.skeleton, bvh.skeleton, what=f"reference {path}")
+    animation = animation_from_bvh(bvh)
+    fps = source_fps or nominal_fps(bvh.frame_time)
+    scale = _matching_scale(model, bvh.skeleton)
+    if scale is not None:
+        animation = Animation(model.codec.skeleton, animation.rotations,
+                              animation.translations * (scale / model.codec.scale), fps)
+    else:
+        animation = Animation(model.codec.skeleton, animation.rotations, animation.translations, fps)
+    features = model.codec.encode(animation)
+    start = model.codec.start_position(animation)
+    if features.shape[0] < 2:
+        raise SinMDMError(f"reference {path} is too short ({features.shape[0]} frame at {model.codec.fps:g} fps)")
+    return Reference(Path(path), features.astype(np.float64), start)
+
+
+def load_trajectory(model: MotionModel, path: str | Path, source_fps: float | None = None) -> Reference:
+    """Only the root path matters for trajectory control, so any skeleton will do:
+    its first joint with position channels, in its own units, at the model's rate."""
+    bvh = read_bvh(path)
+    if bvh.skeleton.same_hierarchy(model.codec.skeleton):
+        return load_reference(model, path, source_fps)
+    codec = build_codec(bvh, fps=model.codec.fps, contacts=[], source_fps=source_fps)
+    if codec.trajectory_joint is None:
+        raise SinMDMError(f"trajectory reference {path} has no joint with position channels")
+    own = codec.encode(bvh, source_fps=source_fps)[:, codec.layout.indices(("root",))]
+    features = np.zeros((own.shape[0], model.features))
+    features[:, model.codec.layout.indices(("root",))] = own
+    return Reference(Path(path), features, codec.start_position(bvh, source_fps=source_fps))
+
+
+def _full(model: MotionModel, reference: Reference, frames: int, offset: int = 0) -> np.ndarray:
+    """The reference's features placed at `offset` in a (F, frames) array."""
+    out = np.zeros((model.features, frames))
+    stop = min(frames, offset + reference.frames)
+    out[:, offset:stop] = reference.features[: stop - offset].T
+    return out
+
+
+def plan_inbetween(model: MotionModel, reference: Reference, keep_start: float = INBETWEEN_KEEP,
+                   keep_end: float = INBETWEEN_KEEP, ramp: int = INBETWEEN_RAMP) -> Plan:
+    """Keep the first and last shares of the reference, generate the frames between."""
+    frames = reference.frames
+    head, tail = int(round(keep_start * frames)), int(round(keep_end * frames))
+    if head + tail >= frames:
+        raise SinMDMError("nothing left to generate: the kept start and end cover the whole reference")
+    keep = frame_ramp(frames, [(0, head), (frames - tail, frames)], ramp)
+    guide = Guide(reference=_full(model, reference, frames), keep=np.broadcast_to(keep, (model.features, frames)))
+    return Plan(guide, frames, reference.start, fix_root=(head, frames - tail), reference=reference)
+
+
+def plan_expand(model: MotionModel, reference: Reference, before: float = EXPAND_SHARE,
+                after: float = EXPAND_SHARE, ramp: int = EXPAND_RAMP) -> Plan:
+    """Generate new frames before and after the reference (shares of its length)."""
+    ahead, behind = int(round(before * reference.frames)), int(round(after * reference.frames))
+    frames = ahead + reference.frames + behind
+    keep = frame_ramp(frames, [(ahead, ahead + reference.frames)], ramp)
+    guide = Guide(reference=_full(model, reference, frames, ahead), keep=np.broadcast_to(keep, (model.features, frames)))
+    return Plan(guide, frames, reference.start, reference=reference)
+
+
+def plan_keyframes(model: MotionModel, reference: Reference, keyframes: list[int], hold: int = 0) -> Plan:
+    """Keep the reference's poses at sparse frames (each held for `hold` frames either side)."""
+    frames = reference.frames
+    bad = [k for k in keyframes if not 0 <= k < frames]
+    if bad:
+        raise SinMDMError(f"keyframe {bad[0]} is outside the reference (0..{frames - 1})")
+    if not keyframes:
+        raise SinMDMError("no keyframes given")
+    keep = np.zeros(frames)
+    for k in keyframes:
+        keep[max(0, k - hold) : k + hold + 1] = 1.0
+    # Root velocities are only meaningful over consecutive kept frames: keep pose and height.
+    mask = np.broadcast_to(keep, (model.features, frames)).copy()
+    root = model.codec.layout.indices(("root",))
+    if len(root):
+        mask[root[[0, 2]]] = 0.0
+    guide = Guide(reference=_full(model, reference, frames), keep=mask)
+    return Plan(guide, frames, reference.start, reference=reference)
+
+
+def plan_control(model: MotionModel, reference: Reference, joints: str | None = None, subtree: str | None = None,
+                 trajectory: bool = False, frames: int | None = None) -> Plan:
+    """Keep a joint set (and/or the root path) of the reference for every frame."""
+    names = joint_names(model.codec, joints, subtree)
+    lower = joints == "lower-body"
+    channels = [feature_channels(model.codec, names, with_root=lower)] if names else []
+    if trajectory:
+        own_skeleton = np.abs(reference.features).sum(axis=0)[model.codec.layout.indices(("rotation",))].any()
+        channels.append(trajectory_channels(model.codec, with_heading=bool(own_skeleton)))
+    if not channels:
+        raise SinMDMError("nothing to keep: give --joints, --subtree or --trajectory")
+    length = frames or reference.frames
+    if length > reference.frames:
+        raise SinMDMError(f"the reference has only {reference.frames} frames; asked for {length}")
+    mask = np.zeros((model.features, length))
+    mask[np.unique(np.concatenate(channels))] = 1.0
+    return Plan(Guide(reference=_full(model, reference, length), keep=mask), length, reference.start, reference=reference)
+
+
+def plan_harmonize(model: MotionModel, reference: Reference, factor: int = 2, frame_range: tuple[int, int] | None = None,
+                   joints: str | None = None, base: np.ndarray | None = None, border: int = HARMONIZE_BORDER) -> Plan:
+    """Whole clip: ILVR towards the reference's low frequencies (style transfer).
+    Partial (frames and/or joints): the reference's portion is pasted into `base`
+    (a generated motion, (frames, F)) and only that portion and its borders are
+    harmonized; the rest of `base` is kept."""
+    frames = reference.frames
+    target = _full(model, reference, frames)
+    if frame_range is None and not joints:
+        region = np.ones((model.features, frames))
+        return Plan(Guide(reference=target, harmonize=region, factor=factor), frames, reference.start, reference=reference)
+    if base is None:
+        raise SinMDMError("partial harmonization needs a base motion")
+    start, stop = frame_range or (0, frames)
+    if not 0 <= start < stop <= frames:
+        raise SinMDMError(f"--frames {start}:{stop} is outside the reference (0..{frames})")
+    channels = feature_channels(model.codec, joint_names(model.codec, joints), with_root=False) if joints else np.arange(model.features)
+    pasted = np.zeros((model.features, frames))
+    pasted[np.ix_(channels, np.arange(start, stop))] = 1.0
+    composite = base.T * (1 - pasted) + target * pasted
+    # The harmonized region grows by `border` frames on each side with a linear fade.
+    soft = frame_ramp(frames + 2 * border, [(start, stop + 2 * border)], border)[border:-border] if border else pasted[0]
+    region = np.zeros((model.features, frames))
+    region[channels] = np.maximum(soft, 0.0)
+    keep = 1.0 - region
+    return Plan(Guide(reference=composite, keep=keep, harmonize=region, factor=factor), frames, reference.start, reference=reference)
+
+
+def land_on_reference(model: MotionModel, plan: Plan, result: GenerationResult) -> GenerationResult:
+    """After in-betweening, spread the root's x/z drift over the generated gap so the
+    kept end lands where it stands in the reference."""
+    if plan.fix_root is None or plan.reference is None:
+        return result
+    root = model.codec.layout.indices(("root",))
+    if not len(root):
+        return result
+    gap_start, gap_stop = plan.fix_root
+    dx, dz = root[0], root[2]
+    features = result.features.copy()
+    ref = plan.reference.features
+    for sample in features:
+        for channel in (dx, dz):
+            want = ref[gap_start + 1 : gap_stop + 1, channel].sum()
+            got = sample[gap_start + 1 : gap_stop + 1, channel].sum()
+            sample[gap_start + 1 : gap_stop + 1, channel] += (want - got) / (gap_stop - gap_start)
+    clips = [model.codec.decode_bvh(f, plan.start) for f in features]
+    return GenerationResult(features, clips, result.seeds, result.seconds)
+
+
+def run_plan(model: MotionModel, plan: Plan, request: GenerationRequest, progress=None) -> GenerationResult:
+    request = GenerationRequest(plan.frames, request.count, request.seed, request.sampler, request.steps, request.eta, request.hop)
+    result = generate(model, request, guide=plan.guide, start=plan.start, progress=progress)
+    return land_on_reference(model, plan, result)

@@ -1,0 +1,125 @@
+"""Loading exported denoisers: one or more `.onnx` files of the same model
+(one per window length), validated from their own metadata."""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .errors import ModelError, SinMDMError
+from .features import MotionCodec
+from .model_format import INPUT_NAMES, METADATA_KEY, OUTPUT_NAME, decode_metadata
+
+DEMO_MODEL = Path(__file__).resolve().parent / "demo" / "stomper_w64.onnx"
+
+
+def _session_options(threads: int | None):
+    import onnxruntime as ort
+
+    options = ort.SessionOptions()
+    options.graph_optimization_level = ort.GraphOptimizationLevel.ORT_ENABLE_ALL
+    options.intra_op_num_threads = threads or os.cpu_count() or 1
+    options.inter_op_num_threads = 1
+    options.execution_mode = ort.ExecutionMode.ORT_SEQUENTIAL
+    options.log_severity_level = 3
+    return options
+
+
+@dataclass
+class Denoiser:
+    """One exported graph: x0 = denoise(x_t (N, F, W), t (N,))."""
+
+    path: Path
+    window: int
+    session: object
+
+    def __call__(self, x_t: np.ndarray, t: np.ndarray) -> np.ndarray:
+        return self.session.run(
+            [OUTPUT_NAME], {INPUT_NAMES[0]: x_t.astype(np.float32, copy=False), INPUT_NAMES[1]: t.astype(np.float32, copy=False)}
+        )[0]
+
+
+@dataclass
+class MotionModel:
+    codec: MotionCodec
+    alphas_cumprod: np.ndarray  # float64 (1000,)
+    receptive_field: int
+    trained_window: int
+    denoisers: dict[int, Denoiser]
+    metadata: dict
+    start_position: np.ndarray = field(default_factory=lambda: np.zeros(2))
+
+    @property
+    def windows(self) -> list[int]:
+        return sorted(self.denoisers)
+
+    @property
+    def features(self) -> int:
+        return self.codec.width
+
+    def denoiser_for(self, frames: int) -> Denoiser:
+        """The trained window when present, else the smallest window that covers `frames`
+        (or the largest one for longer requests)."""
+        if self.trained_window in self.denoisers:
+            return self.denoisers[self.trained_window]
+        covering = [w for w in self.windows if w >= frames]
+        return self.denoisers[covering[0] if covering else self.windows[-1]]
+
+
+def _read_metadata(path: Path) -> tuple[dict, object]:
+    import onnxruntime as ort
+
+    if not path.is_file():
+        raise SinMDMError(f"model file {path} does not exist")
+    try:
+        session = ort.InferenceSession(str(path), providers=["CPUExecutionProvider"])
+    except Exception as exc:  # onnxruntime raises its own exception types for damaged files
+        first_line = str(exc).strip().splitlines()[0][:160] if str(exc).strip() else type(exc).__name__
+        raise ModelError(f"{path} is not a readable ONNX model ({first_line})") from None
+    props = session.get_modelmeta().custom_metadata_map
+    return decode_metadata(props.get(METADATA_KEY), str(path)), session
+
+
+def load_model(paths: list[str | os.PathLike] | str | os.PathLike | None = None, threads: int | None = None) -> MotionModel:
+    """Load one model from its `.onnx` windows (default: the bundled demo model)."""
+    if paths is None or (isinstance(paths, list) and not paths):
+        paths = [DEMO_MODEL]
+    if isinstance(paths, (str, os.PathLike)):
+        paths = [paths]
+    import onnxruntime as ort
+
+    options = _session_options(threads)
+    first: dict | None = None
+    denoisers: dict[int, Denoiser] = {}
+    for raw in paths:
+        path = Path(raw)
+        metadata, _ = _read_metadata(path)
+        if first is None:
+            first = metadata
+        elif metadata["model_id"] != first["model_id"]:
+            raise ModelError(f"{path} belongs to another model than {Path(paths[0])}: windows of different models cannot be mixed")
+        window = int(metadata["window"])
+        if window in denoisers:
+            raise ModelError(f"{path} repeats window {window}")
+        session = ort.InferenceSession(str(path), sess_options=options, providers=["CPUExecutionProvider"])
+        inputs = [i.name for i in session.get_inputs()]
+        if inputs != list(INPUT_NAMES):
+            raise ModelError(f"{path} has inputs {inputs}, expected {list(INPUT_NAMES)}")
+        denoisers[window] = Denoiser(path, window, session)
+    try:
+        codec = MotionCodec.from_dict(first["codec"])
+    except (KeyError, TypeError, ValueError) as exc:
+        raise ModelError(f"{Path(paths[0])}: the skeleton or feature layout in its metadata is invalid ({exc})") from None
+    start = first.get("start_position") or [0.0, 0.0]
+    return MotionModel(
+        codec=codec,
+        alphas_cumprod=np.asarray(first["alphas_cumprod"], dtype=np.float64),
+        receptive_field=int(first["receptive_field"]),
+        trained_window=int(first.get("trained_window", first["window"])),
+        denoisers=denoisers,
+        metadata=first,
+        start_position=np.asarray(start, dtype=np.float64),
+    )

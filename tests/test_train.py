@@ -1,0 +1,175 @@
+"""Training: real short runs on the demo clip, durability, resume, bad input."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from sinmdm.runtime.bvh import BVH, read_bvh, write_bvh
+from sinmdm.train.checkpoint import load_config, load_state
+from sinmdm.train.data import BatchSampler
+from sinmdm.train.presets import PRESETS
+from sinmdm.train.trainer import resolve_device
+
+from .conftest import DEMO_CLIP, TINY_TRAIN_ARGS, run_cli
+
+
+def train(*args: str, check: bool = True):
+    return run_cli("sinmdm", "train", *args, *TINY_TRAIN_ARGS, check=check)
+
+
+def weights(run_dir: Path) -> dict[str, torch.Tensor]:
+    state = load_state(run_dir)
+    return {**{f"model.{k}": v for k, v in state["model"].items()}, **{f"ema.{k}": v for k, v in state["ema"].items()}}
+
+
+def assert_same_weights(a: Path, b: Path) -> None:
+    wa, wb = weights(a), weights(b)
+    assert wa.keys() == wb.keys()
+    for key in wa:
+        assert torch.equal(wa[key], wb[key]), key
+
+
+def test_short_run_and_info(tiny_run):
+    info = json.loads(run_cli("sinmdm", "info", str(tiny_run), "--json", check=True).stdout)
+    assert info["step"] == 10 and info["preset"] == "cpu" and info["finished"]
+    assert info["clip"]["name"] == "stomper.bvh"
+    assert info["window"] == 48 and info["receptive_field"] == 23
+    assert info["parameters"] > 0
+    log = [json.loads(line) for line in (tiny_run / "log.jsonl").read_text().splitlines()]
+    assert [entry["step"] for entry in log] == [10]
+    config = load_config(tiny_run)
+    assert len(config["codec"]["layout"]) > 0 and config["schedule"]["name"] == "cosine"
+    rich = run_cli("sinmdm", "info", str(tiny_run), check=True)
+    assert "stomper.bvh" in rich.stdout + rich.stderr
+
+
+def test_steps_is_the_total_to_reach(tmp_path):
+    run_dir = tmp_path / "run"
+    train(str(DEMO_CLIP), "--out", str(run_dir), "--steps", "5")
+    first = weights(run_dir)
+    train(str(DEMO_CLIP), "--out", str(run_dir), "--steps", "10", "--resume")
+    config = load_config(run_dir)
+    assert config["step"] == 10 and config["finished"]
+    assert not all(torch.equal(first[k], v) for k, v in weights(run_dir).items())
+    log = [json.loads(line)["step"] for line in (run_dir / "log.jsonl").read_text().splitlines()]
+    assert log == [5, 10]
+
+
+def test_kill_and_resume(tmp_path):
+    run_dir = tmp_path / "killed"
+    exe = Path(sys.executable).parent / "sinmdm"
+    process = subprocess.Popen(
+        [str(exe), "train", str(DEMO_CLIP), "--out", str(run_dir), "--steps", "150", *TINY_TRAIN_ARGS],
+        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+    )
+    deadline = time.time() + 120
+    while time.time() < deadline:
+        try:
+            if load_config(run_dir)["step"] >= 10:
+                break
+        except Exception:
+            pass
+        time.sleep(0.05)
+    process.send_signal(signal.SIGKILL)
+    process.wait()
+    config = load_config(run_dir)  # the pair on disk is consistent after a SIGKILL
+    step = config["step"]
+    assert 10 <= step < 150 and step % 5 == 0
+    train(str(DEMO_CLIP), "--out", str(run_dir), "--steps", "150", "--resume")
+    straight = tmp_path / "straight"
+    train(str(DEMO_CLIP), "--out", str(straight), "--steps", "150")
+    assert_same_weights(run_dir, straight)
+
+
+def test_existing_run_needs_resume(tiny_run):
+    result = train(str(DEMO_CLIP), "--out", str(tiny_run), "--steps", "20", check=False)
+    assert result.returncode == 2 and "--resume" in result.stderr
+
+
+def test_resume_from_another_clip_is_refused(tmp_path, tiny_run):
+    other = tmp_path / "other.bvh"
+    clip = read_bvh(DEMO_CLIP)
+    write_bvh(other, BVH(clip.skeleton, clip.frame_time, clip.values[::-1].copy()))
+    result = train(str(other), "--out", str(tiny_run), "--steps", "20", "--resume", check=False)
+    assert result.returncode == 2 and "another file" in result.stderr
+    assert load_config(tiny_run)["step"] == 10
+
+
+def test_resume_with_other_config_is_refused(tiny_run):
+    result = run_cli("sinmdm", "train", str(DEMO_CLIP), "--out", str(tiny_run), "--steps", "20", "--resume",
+                     "--width", "64", "--batch", "4", "--crop", "48")
+    assert result.returncode == 2 and "width" in result.stderr
+
+
+def test_corrupted_checkpoint(tmp_path, tiny_run):
+    import shutil
+
+    broken = tmp_path / "broken"
+    shutil.copytree(tiny_run, broken)
+    (broken / "checkpoint.pt").write_bytes(b"not a checkpoint")
+    result = train(str(DEMO_CLIP), "--out", str(broken), "--steps", "20", "--resume", check=False)
+    assert result.returncode == 2 and "corrupted" in result.stderr and "Traceback" not in result.stderr
+
+
+def test_clip_shorter_than_receptive_field(tmp_path):
+    clip = read_bvh(DEMO_CLIP)
+    short = tmp_path / "short.bvh"
+    write_bvh(short, BVH(clip.skeleton, clip.frame_time, clip.values[:15].copy()))
+    result = train(str(short), "--out", str(tmp_path / "run"), "--steps", "2", check=False)
+    assert result.returncode == 2 and "receptive field" in result.stderr
+    assert not (tmp_path / "run").exists()
+
+
+def test_unwritable_output(tmp_path):
+    blocker = tmp_path / "file"
+    blocker.write_text("")
+    result = train(str(DEMO_CLIP), "--out", str(blocker / "run"), "--steps", "2", check=False)
+    assert result.returncode == 2 and "Traceback" not in result.stderr
+
+
+def test_nan_clip_is_refused(tmp_path):
+    text = DEMO_CLIP.read_text().splitlines()
+    text[-1] = " ".join(["nan"] + text[-1].split()[1:])
+    bad = tmp_path / "nan.bvh"
+    bad.write_text("\n".join(text) + "\n")
+    result = train(str(bad), "--out", str(tmp_path / "run"), "--steps", "2", check=False)
+    assert result.returncode == 2 and "nan.bvh" in result.stderr
+
+
+def test_paper_preset_batches_whole_clip_rescaled():
+    config = PRESETS["paper"]
+    assert (config.steps, config.batch, config.crop, config.lr, config.lr_gamma, config.ema) == (60000, 64, None, 1e-4, 0.99998, None)
+    clip = torch.randn(10, 120)
+    sampler = BatchSampler(clip, config, torch.Generator().manual_seed(0))
+    lengths = {sampler().shape[2] for _ in range(20)}
+    assert all(88 <= n <= 150 and n % 4 == 0 for n in lengths) and len(lengths) > 3
+    batch = sampler()
+    assert batch.shape[0] == 64 and torch.equal(batch[0], batch[63])
+
+
+def test_cpu_preset_crops():
+    config = PRESETS["cpu"]
+    sampler = BatchSampler(torch.randn(10, 300), config, torch.Generator().manual_seed(0))
+    batch = sampler()
+    assert batch.shape == (64, 10, 64) and not torch.equal(batch[0], batch[1])
+
+
+def test_paper_preset_runs_a_step(tmp_path):
+    run_cli("sinmdm", "train", str(DEMO_CLIP), "--out", str(tmp_path / "paper"), "--preset", "paper",
+            "--steps", "1", "--width", "32", "--batch", "2", check=True)
+    config = load_config(tmp_path / "paper")
+    assert config["train"]["preset"] == "paper" and config["window"] == 360
+
+
+def test_device_auto_is_cpu_here():
+    assert resolve_device("auto").type == ("cuda" if torch.cuda.is_available() else "cpu")
