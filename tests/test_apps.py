@@ -47,8 +47,9 @@ def reference(tiny):
 
 
 def test_frame_ramp_is_inside_the_kept_range():
-    w = frame_ramp(20, [(0, 5), (15, 20)], 3)
-    assert list(w[:2]) == [1, 1] and 0 < w[2] < w[3] < w[4] < 1 and w[5:15].sum() == 0 and w[-1] == 1
+    w = frame_ramp(20, [(0, 8), (12, 20)], 3)
+    assert list(w[:5]) == [1] * 5 and list(w[5:8]) == [0.75, 0.5, 0.25] and w[8:12].sum() == 0
+    assert list(w[12:15]) == [0.25, 0.5, 0.75] and w[-1] == 1
 
 
 def test_inbetween_keeps_both_ends_and_lands_on_the_path(tiny, reference):

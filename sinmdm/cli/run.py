@@ -114,14 +114,19 @@ def convert(
 
     if target.exists() and not force:
         raise SinMDMError(f"{target} exists; pass --force to overwrite")
-    if target.suffix.lower() != ".bvh":
-        raise SinMDMError(f"cannot write '{target.suffix}' files: use .bvh")
+    if target.suffix.lower() not in (".bvh", ".glb"):
+        raise SinMDMError(f"cannot write '{target.suffix}' files: use .bvh or .glb")
     bvh = read_bvh(source)
     rate = fps or source_fps or nominal_fps(bvh.frame_time)
     codec = build_codec(bvh, fps=rate, units=units, contacts=_contacts(contacts), source_fps=source_fps)
     features = codec.encode(bvh, source_fps=source_fps)
     out = codec.decode_bvh(features, codec.start_position(bvh, source_fps=source_fps))
-    write_bvh(target, out)
+    if target.suffix.lower() == ".glb":
+        from ..preview.gltf import write_glb
+
+        write_glb(out, target, units=units)
+    else:
+        write_bvh(target, out)
     summary = {"source": str(source), "target": str(target), "frames": out.frames, "fps": out.fps,
                "feature_width": codec.width}
     if fps is None:

@@ -108,7 +108,8 @@ def plan_inbetween(model: MotionModel, reference: Reference, keep_start: float =
         raise SinMDMError("nothing left to generate: the kept start and end cover the whole reference")
     keep = frame_ramp(frames, [(0, head), (frames - tail, frames)], ramp)
     guide = Guide(reference=_full(model, reference, frames), keep=np.broadcast_to(keep, (model.features, frames)))
-    return Plan(guide, frames, reference.start, fix_root=(head, frames - tail), reference=reference)
+    blended = np.flatnonzero(keep < 1.0)  # the gap and its ramps: where root velocities were generated
+    return Plan(guide, frames, reference.start, fix_root=(int(blended[0]) - 1, int(blended[-1]) + 1), reference=reference)
 
 
 def plan_expand(model: MotionModel, reference: Reference, before: float = EXPAND_SHARE,

@@ -109,7 +109,7 @@ def write_outputs(
     temporary: list[tuple[Path, Path]] = []
     try:
         for path, write in planned:
-            tmp = path.with_name(f".{path.name}.part")
+            tmp = path.with_name(f".{path.stem}.part{path.suffix}")  # writers choose the format by suffix
             write(tmp)
             temporary.append((tmp, path))
         for tmp, path in temporary:
