@@ -9,11 +9,11 @@ import json
 from pathlib import Path
 
 RESULTS = Path(__file__).resolve().parent / "results"
-PAPER_ROWS = [
-    ("paper: SinMDM, Mixamo mean (10 clips)", 94.3, 1.42, 1.00, 0.13, 0.03),
-    ("paper: SinMDM, Gangnam style", 98.1, 1.55, 1.12, None, None),
-    ("paper: GANimator, Mixamo mean", 94.3, 1.24, 1.17, 0.09, 0.13),
-    ("notes: CPU pilot, 64-frame windows, 50 steps", 87.9, 1.13, 0.87, 0.12, None),
+PAPER_ROWS = [  # name, steps, samples, coverage, global, local, inter, intra diff
+    ("paper: SinMDM, Mixamo mean (10 clips)", 1000, 20, 94.3, 1.42, 1.00, 0.13, 0.03),
+    ("paper: SinMDM, Gangnam style", 1000, 20, 98.1, 1.55, 1.12, None, None),
+    ("paper: GANimator, Mixamo mean", "-", 20, 94.3, 1.24, 1.17, 0.09, 0.13),
+    ("notes: CPU pilot (Mixamo dance), 64-frame windows", 50, 10, 87.9, 1.13, 0.87, 0.12, None),
 ]
 
 
@@ -37,8 +37,8 @@ def quality_table() -> str:
                 f"| {fmt(row['global_diversity'])} | {fmt(row['local_diversity'])} | {fmt(row['inter_diversity'])} "
                 f"| {fmt(row['intra_diversity_diff'])} | {row['sampling_seconds'] / row['samples']:.2f} |"
             )
-    for name, cov, glob, local, inter, intra in PAPER_ROWS:
-        lines.append(f"| {name} | | | | | 1000 | 20 | {fmt(cov, 1)} | {fmt(glob)} | {fmt(local)} | {fmt(inter)} | {fmt(intra)} | |")
+    for name, steps, samples, cov, glob, local, inter, intra in PAPER_ROWS:
+        lines.append(f"| {name} | | | | | {steps} | {samples} | {fmt(cov, 1)} | {fmt(glob)} | {fmt(local)} | {fmt(inter)} | {fmt(intra)} | |")
     return "\n".join(lines) + "\n"
 
 
@@ -62,8 +62,41 @@ def speed_table() -> str:
     return "\n".join(lines) + "\n"
 
 
+def _duration(seconds: float) -> str:
+    return f"{seconds / 60:.0f} min" if seconds < 3 * 3600 else f"{seconds / 3600:.0f} h"
+
+
+def train_speed_table() -> str:
+    path = RESULTS / "train_speed.json"
+    if not path.exists():
+        return "(no training-speed results yet)\n"
+    lines = ["| clip | preset | features | frames per example | bf16 | s per iteration | projected full run |",
+             "|---|---|---|---|---|---|---|"]
+    for r in json.loads(path.read_text())["rows"]:
+        steps = 3000 if r["preset"] == "cpu" else 60000
+        lines.append(f"| {r['clip']} | {r['preset']} | {r['features']} | {r['window']} | {r['bf16']} | {r['seconds_per_iteration']:.3f} "
+                     f"| {_duration(r['seconds_per_iteration'] * steps)} ({steps} it) |")
+    return "\n".join(lines) + "\n"
+
+
+def steps_table() -> str:
+    path = RESULTS / "steps_compare.json"
+    if not path.exists():
+        return "(no step comparison yet)\n"
+    lines = ["| clip | steps | samples | coverage % | global div | local div | inter div | intra div diff | s per sample |",
+             "|---|---|---|---|---|---|---|---|---|"]
+    for entry in json.loads(path.read_text()):
+        for row in entry["rows"]:
+            lines.append(f"| {entry['clip']} | {row['steps']} | {row['samples']} x {row['frames']} f | {fmt(row['coverage'], 1)} "
+                         f"| {fmt(row['global_diversity'])} | {fmt(row['local_diversity'])} | {fmt(row['inter_diversity'])} "
+                         f"| {fmt(row['intra_diversity_diff'])} | {row['sampling_seconds'] / row['samples']:.1f} |")
+    return "\n".join(lines) + "\n"
+
+
+TABLES = {"QUALITY_TABLE": quality_table, "SPEED_TABLE": speed_table, "TRAIN_SPEED_TABLE": train_speed_table,
+          "STEPS_TABLE": steps_table}
+
 if __name__ == "__main__":
-    print("## Quality\n")
-    print(quality_table())
-    print("## Sampling speed\n")
-    print(speed_table())
+    for name, table in TABLES.items():
+        print(f"<!-- {name} -->")
+        print(table())
