@@ -162,3 +162,26 @@ def test_command_with_mismatched_reference_exits_2(tiny_model, tmp_path):
                      "--out", str(tmp_path))
     assert result.returncode == 2 and "reference" in result.stderr and "Traceback" not in result.stderr
     assert not any(tmp_path.iterdir())
+
+
+def test_style_transfer_moves_toward_the_model_and_keeps_the_content(tmp_path):
+    """Harmonize a jittery (unseen) version of the demo clip with the bundled demo model:
+    the result is much closer to the model's motion (local diversity against the
+    training clip, the paper's metric) and keeps the reference's low frequencies."""
+    model = load_model()
+    clip = read_bvh(DEMO_CLIP)
+    values = clip.values.copy()
+    t = np.arange(len(values)) / 30
+    values[:, 3:] += 12 * np.sin(2 * np.pi * 9 * t)[:, None] * np.cos(np.arange(values.shape[1] - 3))[None]
+    jittery = tmp_path / "jittery.bvh"
+    write_bvh(jittery, BVH(clip.skeleton, clip.frame_time, values))
+    reference = load_reference(model, jittery)
+    protocol = protocol_for(clip)
+    training = eval_features(clip, protocol)
+    before = evaluate(training, [eval_features(read_bvh(jittery), protocol)])["local_diversity"]
+    result = run_plan(model, plan_harmonize(model, reference), GenerationRequest(frames=1, count=2, seed=0, steps=20))
+    for styled, features in zip(result.clips, result.features):
+        after = evaluate(training, [eval_features(styled, protocol)])["local_diversity"]
+        assert after < 0.6 * before
+        low_error = np.abs(low_pass(features.T, 8) - low_pass(reference.features.T, 8)).mean()
+        assert low_error < 0.05
