@@ -27,7 +27,8 @@ def run(*args: str) -> None:
     subprocess.run([str(bin_dir / args[0]), *args[1:]], check=True)
 
 
-def sample_and_score(model: Path, clip: Path, out: Path, steps: int, count: int, preset: str) -> dict:
+def sample_and_score(model: Path, clip: Path, out: Path, steps: int, count: int, preset: str,
+                     hop: int | None = None, sampler: str = "ddpm") -> dict:
     from sinmdm.eval.motion_features import evaluate_files
     from sinmdm.runtime import GenerationRequest, generate, load_model, read_bvh, write_outputs
 
@@ -35,13 +36,15 @@ def sample_and_score(model: Path, clip: Path, out: Path, steps: int, count: int,
     reference = read_bvh(clip)
     frames = 2 * round(reference.frames / reference.fps * loaded.codec.fps)
     began = time.perf_counter()
-    result = generate(loaded, GenerationRequest(frames=frames, count=count, seed=0, steps=steps))
+    result = generate(loaded, GenerationRequest(frames=frames, count=count, seed=0, steps=steps,
+                                                       hop=hop, sampler=sampler))
     seconds = time.perf_counter() - began
     paths = write_outputs(loaded, result, out, force=True)
     scores = evaluate_files(clip, paths, preset=preset)
     keys = ("coverage", "global_diversity", "local_diversity", "inter_diversity", "intra_diversity_diff")
     return {**{k: scores[k] for k in keys}, "steps": steps, "samples": count, "frames": frames,
-            "sampling_seconds": round(seconds, 2), "eval_preset": preset}
+            "sampling_seconds": round(seconds, 2), "eval_preset": preset,
+            "hop": hop or loaded.denoiser_for(frames).window // 2, "sampler": sampler}
 
 
 def main() -> None:

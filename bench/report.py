@@ -93,8 +93,54 @@ def steps_table() -> str:
     return "\n".join(lines) + "\n"
 
 
+def _metric_cells(row: dict) -> str:
+    return (f"{fmt(row['coverage'], 1)} | {fmt(row['global_diversity'])} | {fmt(row['local_diversity'])} "
+            f"| {fmt(row['inter_diversity'])} | {fmt(row['intra_diversity_diff'])}")
+
+
+def recipe_table() -> str:
+    """The cpu recipe's ablations beside the quality run of the unchanged preset."""
+    path = RESULTS / "recipe.json"
+    if not path.exists():
+        return "(no recipe ablations yet)\n"
+    entries = json.loads(path.read_text())
+    clips = {e["clip"] for e in entries}
+    lines = ["| clip | variant | train it | coverage % | global div | local div | inter div | intra div diff |",
+             "|---|---|---|---|---|---|---|---|"]
+    quality = RESULTS / "quality.json"
+    for entry in json.loads(quality.read_text()) if quality.exists() else []:
+        if entry["clip"] in clips and entry["preset"] == "cpu":
+            lines.append(f"| {entry['clip']} | cpu preset as shipped | {entry['train_steps']} | {_metric_cells(entry['rows'][0])} |")
+    for entry in entries:
+        variant = f"{entry['variant']} (`{' '.join(entry['overrides'])}`)"
+        lines.append(f"| {entry['clip']} | {variant} | {entry['train_steps']} | {_metric_cells(entry['rows'][0])} |")
+    return "\n".join(lines) + "\n"
+
+
+def fast_sampling_table() -> str:
+    """Fewer steps and sparser windows on the quality runs' models, 20 samples each."""
+    path = RESULTS / "fast_sampling.json"
+    if not path.exists():
+        return "(no fast-sampling grid yet)\n"
+    lines = ["| clip | sampler | steps | hop | samples | coverage % | global div | local div | inter div | intra div diff |",
+             "|---|---|---|---|---|---|---|---|---|---|"]
+    quality = RESULTS / "quality.json"
+    entries = json.loads(path.read_text())
+    clips = {e["clip"] for e in entries}
+    for entry in json.loads(quality.read_text()) if quality.exists() else []:
+        if entry["clip"] in clips:
+            row = entry["rows"][0]
+            lines.append(f"| {entry['clip']} | ddpm (default) | {row['steps']} | {entry['window'] // 2} "
+                         f"| {row['samples']} x {row['frames']} f | {_metric_cells(row)} |")
+    for entry in entries:
+        for row in entry["rows"]:
+            lines.append(f"| {entry['clip']} | {row['sampler']} | {row['steps']} | {row['hop']} "
+                         f"| {row['samples']} x {row['frames']} f | {_metric_cells(row)} |")
+    return "\n".join(lines) + "\n"
+
+
 TABLES = {"QUALITY_TABLE": quality_table, "SPEED_TABLE": speed_table, "TRAIN_SPEED_TABLE": train_speed_table,
-          "STEPS_TABLE": steps_table}
+          "STEPS_TABLE": steps_table, "RECIPE_TABLE": recipe_table, "FAST_SAMPLING_TABLE": fast_sampling_table}
 
 if __name__ == "__main__":
     for name, table in TABLES.items():

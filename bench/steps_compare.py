@@ -20,6 +20,8 @@ def main() -> None:
     parser.add_argument("--clip", required=True)
     parser.add_argument("--steps", nargs="+", type=int, default=[1000, 50, 20])
     parser.add_argument("--samples", type=int, default=3)
+    parser.add_argument("--hop", type=int, default=None, help="window hop (default: half a window)")
+    parser.add_argument("--sampler", default="ddpm", choices=["ddpm", "ddim"])
     parser.add_argument("--results", type=Path, default=Path(__file__).resolve().parent / "results" / "steps_compare.json")
     args = parser.parse_args()
     config = json.loads((args.run / "config.json").read_text())
@@ -27,7 +29,9 @@ def main() -> None:
     preset = "mixamo24" if args.clip.startswith(MIXAMO) else "default"
     rows = []
     for steps in args.steps:
-        rows.append(sample_and_score(model, MOTIONS / args.clip, args.run / f"compare_{steps}", steps, args.samples, preset))
+        out = args.run / f"compare_{args.sampler}_{steps}_hop{args.hop or config['window'] // 2}"
+        rows.append(sample_and_score(model, MOTIONS / args.clip, out, steps, args.samples, preset,
+                                     hop=args.hop, sampler=args.sampler))
         print(json.dumps(rows[-1]), flush=True)
     previous = json.loads(args.results.read_text()) if args.results.exists() else []
     previous.append({"clip": args.clip, "run": args.run.name, "rows": rows, "date": time.strftime("%Y-%m-%d")})

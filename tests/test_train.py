@@ -65,6 +65,15 @@ def test_steps_is_the_total_to_reach(tmp_path):
     assert log == [5, 10]
 
 
+def test_frame_norm_option(tmp_path):
+    run_dir = tmp_path / "frame"
+    train(str(DEMO_CLIP), "--out", str(run_dir), "--steps", "2", "--norm", "frame")
+    assert load_config(run_dir)["model"]["norm"] == "frame"
+    bad = train(str(DEMO_CLIP), "--out", str(tmp_path / "bad"), "--steps", "2", "--norm", "batch", check=False)
+    assert bad.returncode == 2 and "--norm must be group or frame" in bad.stderr
+    assert not (tmp_path / "bad").exists()
+
+
 def test_kill_and_resume(tmp_path):
     run_dir = tmp_path / "killed"
     exe = Path(sys.executable).parent / "sinmdm"

@@ -44,6 +44,7 @@ def train(
     units: str = typer.Option("auto", "--units", help="File units: auto, m, cm, mm, in, ft, or metres per unit."),
     source_fps: Optional[float] = typer.Option(None, "--source-fps", help="Override the clip's frame rate."),
     contacts: Optional[str] = typer.Option(None, "--contacts", help="Comma-separated contact joints (default: detected)."),
+    norm: Optional[str] = typer.Option(None, "--norm", help="group (the paper's GroupNorm over the window) or frame (per-frame, a strictly local model; see BENCHMARKS.md)."),
 ) -> None:
     """Train a denoiser on one clip."""
     _require_torch()
@@ -52,8 +53,10 @@ def train(
     from ..train.presets import preset as get_preset
     from ..train.trainer import train as run_training
 
+    if norm is not None and norm not in ("group", "frame"):
+        raise SinMDMError(f"--norm must be group or frame, got '{norm}'")
     config = get_preset(preset).with_overrides(
-        steps=steps, width=width, crop=crop, batch=batch, checkpoint_every=checkpoint_every, fps=fps
+        steps=steps, width=width, crop=crop, batch=batch, checkpoint_every=checkpoint_every, fps=fps, norm=norm
     )
     codec_options = {"units": units, "source_fps": source_fps,
                      "contacts": "auto" if not contacts else [c.strip() for c in contacts.split(",")]}

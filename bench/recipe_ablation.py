@@ -1,0 +1,95 @@
+"""CPU-recipe ablations: train one clip with the `cpu` preset plus overrides, export,
+sample 20 motions of twice the clip's length and score them, like bench/quality.py.
+
+    python bench/recipe_ablation.py --clip Joe_Walk-In-Circle.bvh --tag rescale \
+        --set rescale=0.75,1.25 --work runs/recipe --results bench/results/recipe.json
+
+`--set KEY=VALUE` overrides any TrainConfig field (steps, crop, rescale, lr, lr_schedule,
+ema, norm, dropout, width, batch, ...). Finished tags are skipped; an interrupted
+training resumes.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+import time
+from dataclasses import fields
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from quality import MIXAMO, MOTIONS, ROOT, sample_and_score  # noqa: E402
+
+
+def parse_override(config_type, text: str) -> tuple[str, object]:
+    key, _, raw = text.partition("=")
+    kinds = {f.name: f.type for f in fields(config_type)}
+    if key not in kinds:
+        raise SystemExit(f"unknown TrainConfig field {key!r}")
+    kind = str(kinds[key])
+    if raw.lower() == "none":
+        return key, None
+    if "tuple" in kind:
+        return key, tuple(float(v) for v in raw.split(","))
+    if "bool" in kind:
+        return key, raw.lower() in ("1", "true", "yes")
+    if "int" in kind and "." not in raw:
+        return key, int(raw)
+    if "float" in kind:
+        return key, float(raw)
+    return key, raw
+
+
+def main() -> None:
+    from sinmdm.train.presets import TrainConfig, preset
+    from sinmdm.train.trainer import load_config, train
+
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--clip", required=True)
+    parser.add_argument("--tag", required=True)
+    parser.add_argument("--set", dest="overrides", action="append", default=[])
+    parser.add_argument("--samples", type=int, default=20)
+    parser.add_argument("--steps", type=int, default=50, help="sampling steps")
+    parser.add_argument("--work", type=Path, default=ROOT / "runs" / "recipe")
+    parser.add_argument("--results", type=Path, default=ROOT / "bench" / "results" / "recipe.json")
+    args = parser.parse_args()
+
+    overrides = dict(parse_override(TrainConfig, text) for text in args.overrides)
+    config = preset("cpu").with_overrides(**{k: v for k, v in overrides.items() if v is not None})
+    for key, value in overrides.items():
+        if value is None:  # with_overrides ignores None, so set explicit Nones here
+            config = TrainConfig.from_dict({**config.to_dict(), key: None})
+    results = json.loads(args.results.read_text()) if args.results.exists() else []
+    tag = f"{Path(args.clip).stem}-{args.tag}"
+    if any(r["tag"] == tag for r in results):
+        print(f"skip {tag}: already measured")
+        return
+    run_dir = args.work / tag
+    clip = MOTIONS / args.clip
+    began = time.perf_counter()
+    train(clip, run_dir, config, device="cpu", resume=(run_dir / "config.json").exists())
+    train_wall = time.perf_counter() - began
+    run_config = load_config(run_dir)
+    bin_dir = Path(sys.executable).parent
+    subprocess.run([str(bin_dir / "sinmdm"), "export", str(run_dir), "--out", str(run_dir / "model.onnx"),
+                    "--force"], check=True)
+    model = run_dir / f"model_w{run_config['window']}.onnx"
+    protocol = "mixamo24" if args.clip.startswith(MIXAMO) else "default"
+    row = sample_and_score(model, clip, run_dir / f"samples_{args.steps}", args.steps, args.samples, protocol)
+    print(json.dumps(row))
+    results = json.loads(args.results.read_text()) if args.results.exists() else []
+    results.append({
+        "tag": tag, "clip": args.clip, "variant": args.tag, "overrides": args.overrides,
+        "train_steps": run_config["step"], "train_seconds": run_config["elapsed_seconds"],
+        "train_wall_seconds": round(train_wall, 1), "window": run_config["window"],
+        "threads": int(__import__("os").environ.get("OMP_NUM_THREADS", "0")),
+        "rows": [row], "date": time.strftime("%Y-%m-%d"),
+    })
+    args.results.parent.mkdir(parents=True, exist_ok=True)
+    args.results.write_text(json.dumps(results, indent=2) + "\n")
+
+
+if __name__ == "__main__":
+    main()
