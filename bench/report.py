@@ -1,6 +1,7 @@
 """Render bench/results/*.json as the markdown tables of BENCHMARKS.md.
 
     python bench/report.py > /tmp/tables.md
+    python bench/report.py --update BENCHMARKS.md   # refresh the tables in place
 """
 
 from __future__ import annotations
@@ -142,7 +143,28 @@ def fast_sampling_table() -> str:
 TABLES = {"QUALITY_TABLE": quality_table, "SPEED_TABLE": speed_table, "TRAIN_SPEED_TABLE": train_speed_table,
           "STEPS_TABLE": steps_table, "RECIPE_TABLE": recipe_table, "FAST_SAMPLING_TABLE": fast_sampling_table}
 
+def update(path: Path) -> None:
+    """Replace the table under each `<!-- NAME -->` marker of a markdown file."""
+    lines, out = path.read_text().splitlines(), []
+    i = 0
+    while i < len(lines):
+        line = lines[i]
+        out.append(line)
+        i += 1
+        name = line.removeprefix("<!-- ").removesuffix(" -->")
+        if line.startswith("<!-- ") and name in TABLES:
+            while i < len(lines) and lines[i].startswith("|"):
+                i += 1
+            out.extend(TABLES[name]().rstrip("\n").splitlines())
+    path.write_text("\n".join(out) + "\n")
+
+
 if __name__ == "__main__":
-    for name, table in TABLES.items():
-        print(f"<!-- {name} -->")
-        print(table())
+    import sys
+
+    if sys.argv[1:2] == ["--update"]:
+        update(Path(sys.argv[2]))
+    else:
+        for name, table in TABLES.items():
+            print(f"<!-- {name} -->")
+            print(table())
