@@ -18,6 +18,13 @@ PAPER_ROWS = [  # name, steps, samples, coverage, global, local, inter, intra di
 ]
 
 
+def header(*cells: str) -> list[str]:
+    return ["| " + " | ".join(cells) + " |", "|" + "---|" * len(cells)]
+
+
+METRIC_CELLS = ("coverage %", "global div", "local div", "inter div", "intra div diff")
+
+
 def fmt(value, digits=2) -> str:
     return "-" if value is None else f"{value:.{digits}f}"
 
@@ -84,8 +91,7 @@ def steps_table() -> str:
     path = RESULTS / "steps_compare.json"
     if not path.exists():
         return "(no step comparison yet)\n"
-    lines = ["| clip | steps | samples | coverage % | global div | local div | inter div | intra div diff | s per sample |",
-             "|---|---|---|---|---|---|---|---|---|"]
+    lines = header("clip", "steps", "samples", *METRIC_CELLS, "s per sample")
     for entry in json.loads(path.read_text()):
         for row in entry["rows"]:
             lines.append(f"| {entry['clip']} | {row['steps']} | {row['samples']} x {row['frames']} f | {fmt(row['coverage'], 1)} "
@@ -106,8 +112,7 @@ def recipe_table() -> str:
         return "(no recipe ablations yet)\n"
     entries = json.loads(path.read_text())
     clips = {e["clip"] for e in entries}
-    lines = ["| clip | variant | train it | coverage % | global div | local div | inter div | intra div diff |",
-             "|---|---|---|---|---|---|---|---|"]
+    lines = header("clip", "variant", "train it", *METRIC_CELLS)
     quality = RESULTS / "quality.json"
     for entry in json.loads(quality.read_text()) if quality.exists() else []:
         if entry["clip"] in clips and entry["preset"] == "cpu":
@@ -123,8 +128,7 @@ def fast_sampling_table() -> str:
     path = RESULTS / "fast_sampling.json"
     if not path.exists():
         return "(no fast-sampling grid yet)\n"
-    lines = ["| clip | sampler | steps | hop | samples | coverage % | global div | local div | inter div | intra div diff |",
-             "|---|---|---|---|---|---|---|---|---|---|"]
+    lines = header("clip", "sampler", "steps", "hop", "samples", *METRIC_CELLS)
     quality = RESULTS / "quality.json"
     entries = json.loads(path.read_text())
     clips = {e["clip"] for e in entries}
