@@ -27,6 +27,16 @@ def run(*args: str) -> None:
     subprocess.run([str(bin_dir / args[0]), *args[1:]], check=True)
 
 
+def eval_protocol(clip_name: str) -> str:
+    return "mixamo24" if clip_name.startswith(MIXAMO) else "default"
+
+
+def export_trained_window(run_dir: Path, window: int) -> Path:
+    """Export a run at its training window (the export default); the written graph's path."""
+    run("sinmdm", "export", str(run_dir), "--out", str(run_dir / "model.onnx"), "--force")
+    return run_dir / f"model_w{window}.onnx"
+
+
 def sample_and_score(model: Path, clip: Path, out: Path, steps: int, count: int, preset: str,
                      hop: int | None = None, sampler: str = "ddpm") -> dict:
     from sinmdm.eval.motion_features import evaluate_files
@@ -77,9 +87,8 @@ def main() -> None:
             run("sinmdm", "train", str(clip), "--out", str(run_dir), "--preset", args.preset, "--resume", *extra, *args.train_args)
         train_wall = time.perf_counter() - began
         config = json.loads((run_dir / "config.json").read_text())
-        run("sinmdm", "export", str(run_dir), "--out", str(run_dir / "model.onnx"), "--force")
-        model = run_dir / f"model_w{config['window']}.onnx"
-        preset = "mixamo24" if name.startswith(MIXAMO) else "default"
+        model = export_trained_window(run_dir, config["window"])
+        preset = eval_protocol(name)
         rows = []
         for steps in args.steps_list:
             count = args.samples if steps < 1000 else args.samples_1000

@@ -13,14 +13,14 @@ from __future__ import annotations
 
 import argparse
 import json
-import subprocess
+import os
 import sys
 import time
 from dataclasses import fields
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from quality import MIXAMO, MOTIONS, ROOT, sample_and_score  # noqa: E402
+from quality import MOTIONS, ROOT, eval_protocol, export_trained_window, sample_and_score  # noqa: E402
 
 
 def parse_override(config_type, text: str) -> tuple[str, object]:
@@ -57,10 +57,7 @@ def main() -> None:
     args = parser.parse_args()
 
     overrides = dict(parse_override(TrainConfig, text) for text in args.overrides)
-    config = preset("cpu").with_overrides(**{k: v for k, v in overrides.items() if v is not None})
-    for key, value in overrides.items():
-        if value is None:  # with_overrides ignores None, so set explicit Nones here
-            config = TrainConfig.from_dict({**config.to_dict(), key: None})
+    config = TrainConfig.from_dict({**preset("cpu").to_dict(), **overrides})  # keeps explicit Nones
     results = json.loads(args.results.read_text()) if args.results.exists() else []
     tag = f"{Path(args.clip).stem}-{args.tag}"
     if any(r["tag"] == tag for r in results):
@@ -72,19 +69,17 @@ def main() -> None:
     train(clip, run_dir, config, device="cpu", resume=(run_dir / "config.json").exists())
     train_wall = time.perf_counter() - began
     run_config = load_config(run_dir)
-    bin_dir = Path(sys.executable).parent
-    subprocess.run([str(bin_dir / "sinmdm"), "export", str(run_dir), "--out", str(run_dir / "model.onnx"),
-                    "--force"], check=True)
-    model = run_dir / f"model_w{run_config['window']}.onnx"
-    protocol = "mixamo24" if args.clip.startswith(MIXAMO) else "default"
-    row = sample_and_score(model, clip, run_dir / f"samples_{args.steps}", args.steps, args.samples, protocol)
+    model = export_trained_window(run_dir, run_config["window"])
+    row = sample_and_score(model, clip, run_dir / f"samples_{args.steps}", args.steps, args.samples,
+                           eval_protocol(args.clip))
     print(json.dumps(row))
+    # read again: other ablations may have finished (and appended) while this one trained
     results = json.loads(args.results.read_text()) if args.results.exists() else []
     results.append({
         "tag": tag, "clip": args.clip, "variant": args.tag, "overrides": args.overrides,
         "train_steps": run_config["step"], "train_seconds": run_config["elapsed_seconds"],
         "train_wall_seconds": round(train_wall, 1), "window": run_config["window"],
-        "threads": int(__import__("os").environ.get("OMP_NUM_THREADS", "0")),
+        "threads": int(os.environ.get("OMP_NUM_THREADS", "0")),
         "rows": [row], "date": time.strftime("%Y-%m-%d"),
     })
     args.results.parent.mkdir(parents=True, exist_ok=True)

@@ -25,25 +25,35 @@ def header(*cells: str) -> list[str]:
 METRIC_CELLS = ("coverage %", "global div", "local div", "inter div", "intra div diff")
 
 
+def results(name: str):
+    """The parsed bench/results/NAME.json, or None before that benchmark has run."""
+    path = RESULTS / f"{name}.json"
+    return json.loads(path.read_text()) if path.exists() else None
+
+
 def fmt(value, digits=2) -> str:
     return "-" if value is None else f"{value:.{digits}f}"
 
 
+def _metric_cells(row: dict) -> str:
+    return (f"{fmt(row['coverage'], 1)} | {fmt(row['global_diversity'])} | {fmt(row['local_diversity'])} "
+            f"| {fmt(row['inter_diversity'])} | {fmt(row['intra_diversity_diff'])}")
+
+
 def quality_table() -> str:
-    path = RESULTS / "quality.json"
-    if not path.exists():
+    data = results("quality")
+    if data is None:
         return "(no quality results yet)\n"
     lines = [
         "| clip | preset | train it | train time | eval protocol | steps | samples | coverage % | global div | local div | inter div | intra div diff | s per sample |",
         "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
-    for entry in json.loads(path.read_text()):
+    for entry in data:
         for row in entry["rows"]:
             lines.append(
                 f"| {entry['clip']} | {entry['preset']} | {entry['train_steps']} | {entry['train_wall_seconds'] / 60:.1f} min "
-                f"| {row['eval_preset']} | {row['steps']} | {row['samples']} x {row['frames']} f | {fmt(row['coverage'], 1)} "
-                f"| {fmt(row['global_diversity'])} | {fmt(row['local_diversity'])} | {fmt(row['inter_diversity'])} "
-                f"| {fmt(row['intra_diversity_diff'])} | {row['sampling_seconds'] / row['samples']:.2f} |"
+                f"| {row['eval_preset']} | {row['steps']} | {row['samples']} x {row['frames']} f | {_metric_cells(row)} "
+                f"| {row['sampling_seconds'] / row['samples']:.2f} |"
             )
     for name, steps, samples, cov, glob, local, inter, intra in PAPER_ROWS:
         lines.append(f"| {name} | | | | | {steps} | {samples} | {fmt(cov, 1)} | {fmt(glob)} | {fmt(local)} | {fmt(inter)} | {fmt(intra)} | |")
@@ -51,10 +61,9 @@ def quality_table() -> str:
 
 
 def speed_table() -> str:
-    path = RESULTS / "sampling_speed.json"
-    if not path.exists():
+    data = results("sampling_speed")
+    if data is None:
         return "(no sampling-speed results yet)\n"
-    data = json.loads(path.read_text())
     lines = ["| measurement | frames | steps | result |", "|---|---|---|---|"]
     for row in data["rows"]:
         kind = row["kind"]
@@ -75,12 +84,12 @@ def _duration(seconds: float) -> str:
 
 
 def train_speed_table() -> str:
-    path = RESULTS / "train_speed.json"
-    if not path.exists():
+    data = results("train_speed")
+    if data is None:
         return "(no training-speed results yet)\n"
     lines = ["| clip | preset | features | frames per example | bf16 | s per iteration | projected full run |",
              "|---|---|---|---|---|---|---|"]
-    for r in json.loads(path.read_text())["rows"]:
+    for r in data["rows"]:
         steps = 3000 if r["preset"] == "cpu" else 60000
         lines.append(f"| {r['clip']} | {r['preset']} | {r['features']} | {r['window']} | {r['bf16']} | {r['seconds_per_iteration']:.3f} "
                      f"| {_duration(r['seconds_per_iteration'] * steps)} ({steps} it) |")
@@ -88,33 +97,25 @@ def train_speed_table() -> str:
 
 
 def steps_table() -> str:
-    path = RESULTS / "steps_compare.json"
-    if not path.exists():
+    data = results("steps_compare")
+    if data is None:
         return "(no step comparison yet)\n"
     lines = header("clip", "steps", "samples", *METRIC_CELLS, "s per sample")
-    for entry in json.loads(path.read_text()):
+    for entry in data:
         for row in entry["rows"]:
-            lines.append(f"| {entry['clip']} | {row['steps']} | {row['samples']} x {row['frames']} f | {fmt(row['coverage'], 1)} "
-                         f"| {fmt(row['global_diversity'])} | {fmt(row['local_diversity'])} | {fmt(row['inter_diversity'])} "
-                         f"| {fmt(row['intra_diversity_diff'])} | {row['sampling_seconds'] / row['samples']:.1f} |")
+            lines.append(f"| {entry['clip']} | {row['steps']} | {row['samples']} x {row['frames']} f | {_metric_cells(row)} "
+                         f"| {row['sampling_seconds'] / row['samples']:.1f} |")
     return "\n".join(lines) + "\n"
-
-
-def _metric_cells(row: dict) -> str:
-    return (f"{fmt(row['coverage'], 1)} | {fmt(row['global_diversity'])} | {fmt(row['local_diversity'])} "
-            f"| {fmt(row['inter_diversity'])} | {fmt(row['intra_diversity_diff'])}")
 
 
 def recipe_table() -> str:
     """The cpu recipe's ablations beside the quality run of the unchanged preset."""
-    path = RESULTS / "recipe.json"
-    if not path.exists():
+    entries = results("recipe")
+    if entries is None:
         return "(no recipe ablations yet)\n"
-    entries = json.loads(path.read_text())
     clips = {e["clip"] for e in entries}
     lines = header("clip", "variant", "train it", *METRIC_CELLS)
-    quality = RESULTS / "quality.json"
-    for entry in json.loads(quality.read_text()) if quality.exists() else []:
+    for entry in results("quality") or []:
         if entry["clip"] in clips and entry["preset"] == "cpu":
             lines.append(f"| {entry['clip']} | cpu preset as shipped | {entry['train_steps']} | {_metric_cells(entry['rows'][0])} |")
     for entry in entries:
@@ -125,14 +126,12 @@ def recipe_table() -> str:
 
 def fast_sampling_table() -> str:
     """Fewer steps and sparser windows on the quality runs' models, 20 samples each."""
-    path = RESULTS / "fast_sampling.json"
-    if not path.exists():
+    entries = results("fast_sampling")
+    if entries is None:
         return "(no fast-sampling grid yet)\n"
     lines = header("clip", "sampler", "steps", "hop", "samples", *METRIC_CELLS)
-    quality = RESULTS / "quality.json"
-    entries = json.loads(path.read_text())
     clips = {e["clip"] for e in entries}
-    for entry in json.loads(quality.read_text()) if quality.exists() else []:
+    for entry in results("quality") or []:
         if entry["clip"] in clips:
             row = entry["rows"][0]
             lines.append(f"| {entry['clip']} | ddpm (default) | {row['steps']} | {entry['window'] // 2} "
@@ -146,6 +145,7 @@ def fast_sampling_table() -> str:
 
 TABLES = {"QUALITY_TABLE": quality_table, "SPEED_TABLE": speed_table, "TRAIN_SPEED_TABLE": train_speed_table,
           "STEPS_TABLE": steps_table, "RECIPE_TABLE": recipe_table, "FAST_SAMPLING_TABLE": fast_sampling_table}
+
 
 def update(path: Path) -> None:
     """Replace the table under each `<!-- NAME -->` marker of a markdown file."""

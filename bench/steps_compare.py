@@ -11,7 +11,7 @@ import json
 import time
 from pathlib import Path
 
-from quality import MIXAMO, MOTIONS, sample_and_score
+from quality import MOTIONS, eval_protocol, sample_and_score
 
 
 def main() -> None:
@@ -26,7 +26,7 @@ def main() -> None:
     args = parser.parse_args()
     config = json.loads((args.run / "config.json").read_text())
     model = args.run / f"model_w{config['window']}.onnx"
-    preset = "mixamo24" if args.clip.startswith(MIXAMO) else "default"
+    preset = eval_protocol(args.clip)
     rows = []
     for steps in args.steps:
         out = args.run / f"compare_{args.sampler}_{steps}_hop{args.hop or config['window'] // 2}"

@@ -50,11 +50,12 @@ def train(
     _require_torch()
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
+    from ..train.model import NORM_KINDS
     from ..train.presets import preset as get_preset
     from ..train.trainer import train as run_training
 
-    if norm is not None and norm not in ("group", "frame"):
-        raise SinMDMError(f"--norm must be group or frame, got '{norm}'")
+    if norm is not None and norm not in NORM_KINDS:
+        raise SinMDMError(f"--norm must be {' or '.join(NORM_KINDS)}, got '{norm}'")
     config = get_preset(preset).with_overrides(
         steps=steps, width=width, crop=crop, batch=batch, checkpoint_every=checkpoint_every, fps=fps, norm=norm
     )
