@@ -48,3 +48,7 @@ def run_app(app: typer.Typer) -> Callable[[], None]:
             sys.exit(130)
 
     return main
+
+
+RootOption = typer.Option(None, "--root", help="The joint that carries the character through the world (default: detected).")
+UpOption = typer.Option("auto", "--up", help="Up axis of the file: y, z or auto (detected from where the feet rest).")

@@ -10,7 +10,7 @@ import typer
 from rich.table import Table
 
 from ..runtime.errors import SinMDMError
-from .common import console, print_json, run_app
+from .common import RootOption, UpOption, console, print_json, run_app
 
 app = typer.Typer(
     name="sinmdm",
@@ -44,6 +44,8 @@ def train(
     units: str = typer.Option("auto", "--units", help="File units: auto, m, cm, mm, in, ft, or metres per unit."),
     source_fps: Optional[float] = typer.Option(None, "--source-fps", help="Override the clip's frame rate."),
     contacts: Optional[str] = typer.Option(None, "--contacts", help="Comma-separated contact joints (default: detected)."),
+    root: Optional[str] = RootOption,
+    up: str = UpOption,
     norm: Optional[str] = typer.Option(None, "--norm", help="group (the paper's GroupNorm over the window) or frame (per-frame, a strictly local model; see BENCHMARKS.md)."),
 ) -> None:
     """Train a denoiser on one clip."""
@@ -59,7 +61,7 @@ def train(
     config = get_preset(preset).with_overrides(
         steps=steps, width=width, crop=crop, batch=batch, checkpoint_every=checkpoint_every, fps=fps, norm=norm
     )
-    codec_options = {"units": units, "source_fps": source_fps,
+    codec_options = {"units": units, "source_fps": source_fps, "root": root, "up": up,
                      "contacts": "auto" if not contacts else [c.strip() for c in contacts.split(",")]}
     with Progress(
         TextColumn("[bold]training[/bold]"), BarColumn(), TextColumn("{task.completed}/{task.total}"),

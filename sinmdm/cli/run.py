@@ -12,7 +12,7 @@ from rich.tree import Tree
 
 from ..runtime.errors import SinMDMError
 from ..runtime.sampler import DEFAULT_STEPS as DEFAULT_STEPS_CLI
-from .common import console, print_json, run_app
+from .common import RootOption, UpOption, console, print_json, run_app
 
 app = typer.Typer(
     name="sinmdm-run",
@@ -49,21 +49,33 @@ def inspect(
     source_fps: Optional[float] = SourceFpsOption,
     contacts: Optional[str] = ContactsOption,
     fps: float = typer.Option(30.0, "--fps", help="Feature frame rate used to detect contacts."),
+    root: Optional[str] = RootOption,
+    up: str = UpOption,
     as_json: bool = typer.Option(False, "--json", help="Print one JSON object."),
 ) -> None:
-    """Show a clip's skeleton, length, units, contact joints and feature width."""
+    """Show a clip's skeleton, length, units, trajectory joint, up axis, contacts and feature width."""
     from ..runtime.animation import nominal_fps
     from ..runtime.bvh import read_bvh
     from ..runtime.features import build_codec, skeleton_size
+    from ..runtime.masks import body_halves
+    from ..runtime.rig import AXIS_NAMES, analyse_rig, units_warning
 
     bvh = read_bvh(clip)
-    codec = build_codec(bvh, fps=fps, units=units, contacts=_contacts(contacts), source_fps=source_fps)
+    codec = build_codec(bvh, fps=fps, units=units, contacts=_contacts(contacts), source_fps=source_fps, root=root, up=up)
+    rig = analyse_rig(codec.animation(bvh, source_fps), codec.scale, root, up)
     skeleton = bvh.skeleton
     clip_fps = source_fps or nominal_fps(bvh.frame_time)
     contact_names = [skeleton.names[j] for j in codec.contact_joints]
     warnings = []
     if not 5 <= clip_fps <= 1000:
         warnings.append(f"frame time {bvh.frame_time:g} s ({clip_fps:g} fps) looks wrong; pass --source-fps")
+    try:
+        body_halves(codec)
+        humanoid = True
+    except SinMDMError:
+        humanoid = False
+    if units == "auto" and (warning := units_warning(codec.size, humanoid)):
+        warnings.append(warning)
     info = {
         "file": str(clip),
         "joints": skeleton.num_joints,
@@ -78,9 +90,13 @@ def inspect(
         "size_m": skeleton_size(skeleton) * codec.scale,
         "rotation_orders": sorted({skeleton.rotation_order(j) for j in range(skeleton.num_joints)} - {""}),
         "trajectory_joint": None if codec.trajectory_joint is None else skeleton.names[codec.trajectory_joint],
+        "fixed_joints": [skeleton.names[j] for j in codec.fixed_joints],
+        "up_axis": AXIS_NAMES[codec.up_axis],
+        "humanoid_halves": humanoid,
         "contact_joints": contact_names,
         "feature_fps": codec.fps,
         "feature_width": codec.width,
+        "why": list(rig.reasons),
         "warnings": warnings,
     }
     if as_json:
@@ -89,9 +105,11 @@ def inspect(
     console.print(_joint_tree(skeleton, set(contact_names)))
     table = Table(show_header=False, box=None)
     for key, value in info.items():
-        if key not in ("warnings",):
+        if key not in ("warnings", "why"):
             table.add_row(key.replace("_", " "), ", ".join(map(str, value)) if isinstance(value, list) else f"{value:.6g}" if isinstance(value, float) else str(value))
     console.print(table)
+    for reason in rig.reasons:
+        console.print(f"[dim]{reason}[/dim]")
     for warning in warnings:
         console.print(f"[yellow]warning:[/yellow] {warning}")
 
@@ -104,6 +122,8 @@ def convert(
     units: str = UnitsOption,
     source_fps: Optional[float] = SourceFpsOption,
     contacts: Optional[str] = ContactsOption,
+    root: Optional[str] = RootOption,
+    up: str = UpOption,
     force: bool = typer.Option(False, "--force", help="Overwrite an existing output file."),
     as_json: bool = typer.Option(False, "--json", help="Print one JSON object."),
 ) -> None:
@@ -118,7 +138,7 @@ def convert(
         raise SinMDMError(f"cannot write '{target.suffix}' files: use .bvh or .glb")
     bvh = read_bvh(source)
     rate = fps or source_fps or nominal_fps(bvh.frame_time)
-    codec = build_codec(bvh, fps=rate, units=units, contacts=_contacts(contacts), source_fps=source_fps)
+    codec = build_codec(bvh, fps=rate, units=units, contacts=_contacts(contacts), source_fps=source_fps, root=root, up=up)
     features = codec.encode(bvh, source_fps=source_fps)
     out = codec.decode_bvh(features, codec.start_position(bvh, source_fps=source_fps))
     if target.suffix.lower() == ".glb":

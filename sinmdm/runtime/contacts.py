@@ -14,6 +14,7 @@ import numpy as np
 NEAR_FLOOR = 0.10  # a contact joint's lowest point lies this close to the floor
 AT_REST_HEIGHT = 0.03  # a planted joint is this close to its own lowest height
 MIN_PLANTED_SHARE = 0.15  # ... in at least this share of the frames
+NEVER_MOVES = 1e-4  # a joint whose world position spans less than this never leaves its spot
 # The paper's 0.018 m/frame at 30 fps for a ~1.8 m Mixamo character, as a share of size per second.
 SPEED_PER_SIZE = 0.018 * 30 / 1.8
 
@@ -49,4 +50,6 @@ def detect_contact_joints(positions: np.ndarray, fps: float, size: float, up_axi
         joint_speeds(positions, fps) < default_contact_speed(size)
     )
     planted_share = planted.mean(axis=0)
-    return [int(j) for j in np.flatnonzero(near_floor & (planted_share >= MIN_PLANTED_SHARE))]
+    # A static reference root lying on the floor is not a foot.
+    moves = np.ptp(positions, axis=0).max(axis=1) > NEVER_MOVES * size
+    return [int(j) for j in np.flatnonzero(near_floor & moves & (planted_share >= MIN_PLANTED_SHARE))]

@@ -6,8 +6,11 @@ Per frame, in channel order (reference notes, section 4, generalised to any skel
   2. the local translation (metres) of every other joint whose position
      channels vary over the clip;
   3. one contact label per contact joint;
-  4. the trajectory joint (the first with position channels) as (dx, y, dz):
-     x/z velocity per frame, y absolute; the start position is kept aside.
+  4. the trajectory joint (the joint that carries the character, see rig.py) as
+     (d<h1>, <up>, d<h2>): velocity per frame along the two horizontal axes of its
+     parent's frame, height absolute ("dx, y, dz" for a Y-up clip); the start
+     position is kept aside. Static joints above it are not features: their pose
+     is stored and written back exactly.
 
 A `MotionCodec` is everything needed to go both ways for one skeleton: it is
 built once from the training clip and stored in checkpoints and ONNX metadata.
@@ -19,11 +22,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .animation import Animation, animation_from_bvh, animation_to_bvh, global_positions, rest_positions
+from .animation import Animation, animation_from_bvh, animation_to_bvh, global_positions
 from .bvh import BVH, Skeleton
 from .contacts import contact_labels, default_contact_speed, detect_contact_joints
 from .errors import SinMDMError
 from .resample import resample_linear, resample_quaternions
+from .rig import AXIS_NAMES, analyse_rig, skeleton_extent as skeleton_size
 from .rotations import matrix_to_6d, matrix_to_quat, quat_to_matrix, sixd_to_matrix
 
 ROT6D = ("r00", "r01", "r02", "r10", "r11", "r12")
@@ -92,16 +96,6 @@ def skeleton_from_dict(data: dict) -> Skeleton:
     )
 
 
-def skeleton_size(skeleton: Skeleton) -> float:
-    """The character's size in file units: the largest extent of its rest pose
-    (End Sites included), never zero."""
-    points = rest_positions(skeleton)
-    if skeleton.end_sites:
-        ends = [points[p] + (0 if o is None else o) for p, o in skeleton.end_sites]
-        points = np.concatenate([points, np.asarray(ends)], axis=0)
-    return float(max(np.ptp(points, axis=0).max(), 1e-6))
-
-
 def unit_scale(skeleton: Skeleton, units: str | float = "auto") -> float:
     """Metres per file unit. 'auto' guesses from the rest-pose size: characters
     are taken to be between a few centimetres and ~20 m tall."""
@@ -166,6 +160,10 @@ class MotionCodec:
     contact_speed: float  # metres per second
     rest_translations: np.ndarray  # (J, 3) file units, used for translations that are not features
     resample: str = "slerp"
+    up_axis: int = 1  # world axis index (1 = Y-up, 2 = Z-up)
+    height_axis: int = 1  # the trajectory joint's parent-frame axis that points up
+    fixed_joints: tuple[int, ...] = ()  # static joints above the trajectory joint
+    rest_rotations: np.ndarray | None = None  # (J, 4) used for rotations that are not features
     layout: FeatureLayout = field(init=False, compare=False)
 
     def __post_init__(self) -> None:
@@ -187,12 +185,20 @@ class MotionCodec:
         for j in self.contact_joints:
             add("contact", names[j], ("contact",))
         if self.trajectory_joint is not None:
-            add("root", names[self.trajectory_joint], ("dx", "y", "dz"))
+            h1, h2 = self.horizontal_axes
+            add("root", names[self.trajectory_joint], (f"d{AXIS_NAMES[h1]}", AXIS_NAMES[self.height_axis], f"d{AXIS_NAMES[h2]}"))
         return FeatureLayout(tuple(blocks))
 
     @property
+    def horizontal_axes(self) -> tuple[int, int]:
+        """The trajectory's two horizontal axes in its parent's frame (x, z when Y-up)."""
+        h1, h2 = (a for a in range(3) if a != self.height_axis)
+        return h1, h2
+
+    @property
     def rotation_joints(self) -> list[int]:
-        return [j for j in range(self.skeleton.num_joints) if self.skeleton.rotation_order(j)]
+        fixed = set(self.fixed_joints)
+        return [j for j in range(self.skeleton.num_joints) if self.skeleton.rotation_order(j) and j not in fixed]
 
     @property
     def width(self) -> int:
@@ -225,27 +231,28 @@ class MotionCodec:
             parts.append(contact_labels(positions, self.fps, self.contact_speed))
         if self.trajectory_joint is not None:
             root = metres[:, self.trajectory_joint]
-            velocity = np.diff(root[:, [0, 2]], axis=0)
+            velocity = np.diff(root[:, list(self.horizontal_axes)], axis=0)
             velocity = np.concatenate([velocity[:1] if len(velocity) else np.zeros((1, 2)), velocity], axis=0)
-            parts.append(np.stack([velocity[:, 0], root[:, 1], velocity[:, 1]], axis=1))
+            parts.append(np.stack([velocity[:, 0], root[:, self.height_axis], velocity[:, 1]], axis=1))
         return np.concatenate(parts, axis=1).astype(np.float32)
 
     def start_position(self, clip: BVH | Animation, source_fps: float | None = None) -> np.ndarray:
-        """(x, z) of the trajectory joint at the first frame, in metres."""
+        """The trajectory joint's horizontal position at the first frame, in metres."""
         if self.trajectory_joint is None:
             return np.zeros(2)
         animation = self.animation(clip, source_fps)
-        return animation.translations[0, self.trajectory_joint, [0, 2]] * self.scale
+        return animation.translations[0, self.trajectory_joint, list(self.horizontal_axes)] * self.scale
 
     # ------------------------------------------------------------------ decode
     def decode(self, features: np.ndarray, start: np.ndarray | None = None) -> Animation:
         """Animation at the codec's frame rate from (T, F) features; the root path is
-        re-integrated from `start` (x, z in metres, default the origin)."""
+        re-integrated from `start` (horizontal, metres, default the origin)."""
         features = np.asarray(features, dtype=np.float64)
         if features.ndim != 2 or features.shape[1] != self.width:
             raise SinMDMError(f"features have shape {features.shape}, expected (frames, {self.width})")
         frames, joints = features.shape[0], self.skeleton.num_joints
-        matrices = np.broadcast_to(np.eye(3), (frames, joints, 3, 3)).copy()
+        rest = np.eye(3) if self.rest_rotations is None else quat_to_matrix(self.rest_rotations)
+        matrices = np.broadcast_to(rest, (frames, joints, 3, 3)).copy()
         rot = self.layout.indices(("rotation",))
         matrices[:, self.rotation_joints] = sixd_to_matrix(features[:, rot].reshape(frames, -1, 6))
         translations = np.broadcast_to(self.rest_translations, (frames, joints, 3)).copy()
@@ -257,7 +264,10 @@ class MotionCodec:
             origin = np.zeros(2) if start is None else np.asarray(start, dtype=np.float64)
             x = origin[0] + np.concatenate([[0.0], np.cumsum(dx[1:])])
             z = origin[1] + np.concatenate([[0.0], np.cumsum(dz[1:])])
-            translations[:, self.trajectory_joint] = np.stack([x, y, z], axis=1) / self.scale
+            h1, h2 = self.horizontal_axes
+            path = np.zeros((frames, 3))
+            path[:, h1], path[:, self.height_axis], path[:, h2] = x, y, z
+            translations[:, self.trajectory_joint] = path / self.scale
         return Animation(self.skeleton, matrix_to_quat(matrices), translations, self.fps)
 
     def decode_bvh(self, features: np.ndarray, start: np.ndarray | None = None) -> BVH:
@@ -276,6 +286,10 @@ class MotionCodec:
             "contact_speed": self.contact_speed,
             "rest_translations": np.asarray(self.rest_translations).tolist(),
             "resample": self.resample,
+            "up_axis": self.up_axis,
+            "height_axis": self.height_axis,
+            "fixed_joints": [names[j] for j in self.fixed_joints],
+            "rest_rotations": None if self.rest_rotations is None else np.asarray(self.rest_rotations).tolist(),
             "layout": self.layout.to_dict(),
         }
 
@@ -293,6 +307,10 @@ class MotionCodec:
             contact_speed=float(data["contact_speed"]),
             rest_translations=np.asarray(data["rest_translations"], dtype=np.float64),
             resample=data.get("resample", "slerp"),
+            up_axis=int(data.get("up_axis", 1)),
+            height_axis=int(data.get("height_axis", 1)),
+            fixed_joints=tuple(index[n] for n in data.get("fixed_joints", [])),
+            rest_rotations=None if data.get("rest_rotations") is None else np.asarray(data["rest_rotations"], dtype=np.float64),
         )
         if "layout" in data and codec.layout.to_dict() != data["layout"]:
             raise SinMDMError("stored feature layout does not match the one this version derives")
@@ -307,8 +325,11 @@ def build_codec(
     contact_speed: float | None = None,
     source_fps: float | None = None,
     resample: str = "slerp",
+    root: str | None = None,
+    up: str | None = None,
 ) -> MotionCodec:
-    """Derive the feature codec for a clip's skeleton from the clip itself."""
+    """Derive the feature codec for a clip's skeleton from the clip itself; `root`
+    (a joint name) and `up` ('y' or 'z') override what rig.py detects."""
     skeleton = clip.skeleton
     scale = unit_scale(skeleton, units)
     animation = animation_from_bvh(clip)
@@ -317,16 +338,20 @@ def build_codec(
     animation = resample_animation(animation, fps, resample)
     size = skeleton_size(skeleton) * scale
 
+    rig = analyse_rig(animation, scale, root, up)
+    trajectory = rig.trajectory_joint
     positioned = [j for j in range(skeleton.num_joints) if skeleton.position_channels(j)]
-    trajectory = positioned[0] if positioned else None
     spread = np.ptp(animation.translations * scale, axis=0).max(axis=1)  # (J,) metres
-    moving = tuple(j for j in positioned if j != trajectory and spread[j] > 1e-6 * size)
+    moving = tuple(j for j in positioned if j != trajectory and j not in rig.fixed_joints and spread[j] > 1e-6 * size)
     rest = animation.translations.mean(axis=0)
+    rest[list(rig.fixed_joints)] = animation.translations[0, list(rig.fixed_joints)]
+    rest_rotations = animation.rotations[0] if rig.fixed_joints else None
 
     if contacts == "auto":
         positions = global_positions(animation) * scale
-        contact_joints = tuple(detect_contact_joints(positions, fps, size))
+        contact_joints = tuple(detect_contact_joints(positions, fps, size, rig.up_axis))
     else:
         contact_joints = tuple(skeleton.index(name) for name in contacts)
     speed = default_contact_speed(size) if contact_speed is None else float(contact_speed)
-    return MotionCodec(skeleton, float(fps), scale, trajectory, moving, contact_joints, speed, rest, resample)
+    return MotionCodec(skeleton, float(fps), scale, trajectory, moving, contact_joints, speed, rest, resample,
+                       rig.up_axis, rig.height_axis, rig.fixed_joints, rest_rotations)

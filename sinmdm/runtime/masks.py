@@ -54,8 +54,8 @@ def body_halves(codec: MotionCodec) -> tuple[set[str], set[str]]:
     lower = {skeleton.names[pelvis]}
     for child in skeleton.children(pelvis):
         names = subtree(skeleton, skeleton.names[child])
-        heights = [rest[skeleton.index(n), 1] for n in names]
-        if np.mean(heights) < rest[pelvis, 1]:
+        heights = [rest[skeleton.index(n), codec.up_axis] for n in names]
+        if np.mean(heights) < rest[pelvis, codec.up_axis]:
             lower |= names
     upper = set(skeleton.names) - lower
     if len(lower) == 1 or not upper:
