@@ -61,7 +61,7 @@ def test_config_round_trips_through_a_dict():
     with pytest.raises(ValueError):
         ModelConfig.from_dict({**config.to_dict(), "bogus": 1})
     with pytest.raises(ValueError):
-        ModelConfig(features=12, window=4)
+        ModelConfig(features=12, attention_window=4)
 
 
 # ---------------------------------------------------------------- QnA
@@ -70,7 +70,7 @@ def test_config_round_trips_through_a_dict():
 def naive_qna(qna: QnA, x: torch.Tensor) -> torch.Tensor:
     """Builds the key tensor and runs an explicit softmax per window, windows clipped at the ends."""
     batch, _, frames = x.shape
-    heads, d, p = qna.heads, qna.head_dim, qna.window // 2
+    heads, d, p = qna.heads, qna.head_dim, qna.span // 2
     q = qna.query / (qna.query.norm(dim=-1, keepdim=True) + 1e-6) / math.sqrt(d)  # (heads, d)
     keys = (x.transpose(1, 2) @ qna.key_weight + qna.key_bias).transpose(1, 2)  # (B, C, T)
     scores = (keys.reshape(batch, heads, d, frames) * q[None, :, :, None]).sum(2)  # (B, heads, T)
@@ -85,7 +85,7 @@ def naive_qna(qna: QnA, x: torch.Tensor) -> torch.Tensor:
 
 
 def random_qna(window: int, seed: int, dtype: torch.dtype = torch.float32) -> QnA:
-    qna = QnA(channels=16, heads=4, window=window).to(dtype)
+    qna = QnA(channels=16, heads=4, span=window).to(dtype)
     return randomise_(qna, seed=seed, scale=0.5)
 
 

@@ -29,7 +29,7 @@ def _session_options(threads: int | None):
 
 
 @dataclass
-class Denoiser:
+class OnnxDenoiser:
     """One exported graph: x0 = denoise(x_t (N, F, W), t (N,))."""
 
     path: Path
@@ -48,7 +48,7 @@ class MotionModel:
     alphas_cumprod: np.ndarray  # float64 (1000,)
     receptive_field: int
     trained_window: int
-    denoisers: dict[int, Denoiser]
+    denoisers: dict[int, OnnxDenoiser]
     metadata: dict
     start_position: np.ndarray = field(default_factory=lambda: np.zeros(2))
 
@@ -60,7 +60,7 @@ class MotionModel:
     def features(self) -> int:
         return self.codec.width
 
-    def denoiser_for(self, frames: int) -> Denoiser:
+    def denoiser_for(self, frames: int) -> OnnxDenoiser:
         """The trained window when present, else the smallest window that covers `frames`
         (or the largest one for longer requests)."""
         if self.trained_window in self.denoisers:
@@ -93,7 +93,7 @@ def load_model(paths: list[str | os.PathLike] | str | os.PathLike | None = None,
 
     options = _session_options(threads)
     first: dict | None = None
-    denoisers: dict[int, Denoiser] = {}
+    denoisers: dict[int, OnnxDenoiser] = {}
     for raw in paths:
         path = Path(raw)
         metadata, _ = _read_metadata(path)
@@ -108,7 +108,7 @@ def load_model(paths: list[str | os.PathLike] | str | os.PathLike | None = None,
         inputs = [i.name for i in session.get_inputs()]
         if inputs != list(INPUT_NAMES):
             raise ModelError(f"{path} has inputs {inputs}, expected {list(INPUT_NAMES)}")
-        denoisers[window] = Denoiser(path, window, session)
+        denoisers[window] = OnnxDenoiser(path, window, session)
     try:
         codec = MotionCodec.from_dict(first["codec"])
     except (KeyError, TypeError, ValueError) as exc:

@@ -28,7 +28,7 @@ class ModelConfig:
     width: int = 256
     time_embed_dim: int = 256
     heads: int = 4
-    window: int = 3
+    attention_window: int = 3  # frames each QnA query sees (not the training crop)
     groups: int = 32
     dropout: float = 0.5
     # "group": GroupNorm statistics over channels-in-group x all frames (faithful).
@@ -42,8 +42,8 @@ class ModelConfig:
             raise ValueError(f"width {self.width} is not divisible by heads {self.heads}")
         if self.width % self.groups:
             raise ValueError(f"width {self.width} is not divisible by groups {self.groups}")
-        if self.window < 1 or self.window % 2 == 0:
-            raise ValueError(f"window must be odd and >= 1, got {self.window}")
+        if self.attention_window < 1 or self.attention_window % 2 == 0:
+            raise ValueError(f"attention_window must be odd and >= 1, got {self.attention_window}")
         if self.time_embed_dim % 2:
             raise ValueError("time_embed_dim must be even")
         if self.norm not in NORM_KINDS:
@@ -59,6 +59,8 @@ class ModelConfig:
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> "ModelConfig":
+        if "window" in data:  # runs written before the attention span had its own name
+            data = {("attention_window" if k == "window" else k): v for k, v in data.items()}
         known = {f.name for f in fields(cls)}
         unknown = set(data) - known
         if unknown:
@@ -161,23 +163,23 @@ class ResBlock(nn.Module):
 
 
 class QnA(nn.Module):
-    """Learned-query local attention over a window of `window` frames.
+    """Learned-query local attention over `span` frames around each frame.
 
     One learned query per head; softmax over the window (frames outside the
     sequence excluded) of q . k_j + r[j - t + p], weighting the values v_j.
     """
 
-    def __init__(self, channels: int, heads: int, window: int) -> None:
+    def __init__(self, channels: int, heads: int, span: int) -> None:
         super().__init__()
         self.channels = channels
         self.heads = heads
         self.head_dim = channels // heads
-        self.window = window
+        self.span = span
         std = math.sqrt(1.0 / self.head_dim)
         self.query = nn.Parameter(torch.randn(heads, self.head_dim) * std)
         self.key_weight = nn.Parameter(torch.randn(channels, channels) * std)  # (C_in, heads * d)
         self.key_bias = nn.Parameter(torch.zeros(channels))
-        self.rel_pos_bias = nn.Parameter(torch.zeros(heads, window))
+        self.rel_pos_bias = nn.Parameter(torch.zeros(heads, span))
         self.to_value = nn.Conv1d(channels, channels, 1)
         self.to_out = nn.Conv1d(channels, channels, 1)
 
@@ -201,9 +203,9 @@ class QnA(nn.Module):
         # Window sums as depthwise convolutions with kernels exp(r); zero padding
         # means frames outside the sequence contribute nothing (are excluded).
         head_kernel = torch.exp(self.rel_pos_bias).unsqueeze(1)  # (heads, 1, k)
-        channel_kernel = head_kernel.expand(self.heads, self.head_dim, self.window).reshape(
-            self.channels, 1, self.window)
-        pad = self.window // 2
+        channel_kernel = head_kernel.expand(self.heads, self.head_dim, self.span).reshape(
+            self.channels, 1, self.span)
+        pad = self.span // 2
         numerator = F.conv1d(weighted, channel_kernel, padding=pad, groups=self.channels)
         denominator = F.conv1d(weights, head_kernel, padding=pad, groups=self.heads)
         denominator = denominator.clamp_min(torch.finfo(denominator.dtype).tiny)
@@ -217,7 +219,7 @@ class QnABlock(nn.Module):
     def __init__(self, config: ModelConfig, channels: int) -> None:
         super().__init__()
         self.norm = make_norm(config, channels)
-        self.attn = QnA(channels, config.heads, config.window)
+        self.attn = QnA(channels, config.heads, config.attention_window)
 
     def forward(self, x: Tensor) -> Tensor:
         return x + self.attn(self.norm(x))
@@ -271,7 +273,7 @@ class Denoiser(nn.Module):
 def receptive_field(config: ModelConfig) -> int:
     """Frames of input that can reach one output frame, ignoring GroupNorm statistics
     (exact for norm="frame"); 23 for the paper configuration."""
-    conv, qna = CONV_KERNEL, config.window
+    conv, qna = CONV_KERNEL, config.attention_window
     res_block = [conv, conv]
     # Mirrors Denoiser.forward: in conv, three (ResBlock, QnA) pairs, out conv.
     kernels = [conv] + (res_block + [qna]) * 3 + [conv]
