@@ -114,3 +114,15 @@ def test_every_command_runs_on_a_static_root_z_up_clip(tmp_path):
     assert 0 <= scores["coverage"] <= 100
     pytest.importorskip("matplotlib")
     run_cli("sinmdm-run", "preview", files[0], "--out", str(tmp_path / "p.gif"), check=True)
+
+
+def test_a_z_up_path_drives_a_y_up_model_along_the_same_floor_plan(tmp_path):
+    from sinmdm.runtime.applications import load_trajectory
+    from sinmdm.runtime.model import load_model
+
+    model = load_model()  # the bundled demo model is Y-up
+    source = real_clip("Joe_traj-example.bvh")
+    rotated = tmp_path / "path_z_up.bvh"
+    write_bvh(rotated, z_up(read_bvh(source)))
+    y_path, z_path = load_trajectory(model, source, 30.0), load_trajectory(model, rotated, 30.0)
+    assert np.allclose(y_path.features, z_path.features, atol=1e-9) and np.allclose(y_path.start, z_path.start)

@@ -196,6 +196,13 @@ class MotionCodec:
         return h1, h2
 
     @property
+    def handedness(self) -> float:
+        """+1 when (first horizontal, up, second horizontal) is right-handed (x, y, z for
+        Y-up), -1 otherwise (x, z, y for Z-up): paths move between layouts with it."""
+        h1, h2 = self.horizontal_axes
+        return float(np.cross(np.eye(3)[h1], np.eye(3)[self.height_axis])[h2])
+
+    @property
     def rotation_joints(self) -> list[int]:
         fixed = set(self.fixed_joints)
         return [j for j in range(self.skeleton.num_joints) if self.skeleton.rotation_order(j) and j not in fixed]
