@@ -78,7 +78,7 @@ def load_reference(model: MotionModel, path: str | Path, source_fps: float | Non
 
 def load_trajectory(model: MotionModel, path: str | Path, source_fps: float | None = None) -> Reference:
     """Only the root path matters for trajectory control, so any skeleton will do:
-    its first joint with position channels, in its own units, at the model's rate."""
+    its trajectory joint, in its own units and axes, at the model's rate."""
     bvh = read_bvh(path)
     if bvh.skeleton.same_hierarchy(model.codec.skeleton):
         return load_reference(model, path, source_fps)
@@ -86,9 +86,14 @@ def load_trajectory(model: MotionModel, path: str | Path, source_fps: float | No
     if codec.trajectory_joint is None:
         raise SinMDMError(f"trajectory reference {path} has no joint with position channels")
     own = codec.encode(bvh, source_fps=source_fps)[:, codec.layout.indices(("root",))]
+    start = codec.start_position(bvh, source_fps=source_fps)
+    # A Z-up path on a Y-up model (or the reverse): same floor plan, not its mirror image.
+    flip = codec.handedness * model.codec.handedness
+    own[:, 2] *= flip
+    start = start * [1.0, flip]
     features = np.zeros((own.shape[0], model.features))
     features[:, model.codec.layout.indices(("root",))] = own
-    return Reference(Path(path), features, codec.start_position(bvh, source_fps=source_fps))
+    return Reference(Path(path), features, start)
 
 
 def _full(model: MotionModel, reference: Reference, frames: int, offset: int = 0) -> np.ndarray:
