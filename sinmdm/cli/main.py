@@ -63,6 +63,8 @@ def train(
     )
     codec_options = {"units": units, "source_fps": source_fps, "root": root, "up": up,
                      "contacts": "auto" if not contacts else [c.strip() for c in contacts.split(",")]}
+    if units == "auto" and not resume:
+        _warn_about_units(clip, config.fps, codec_options)
     with Progress(
         TextColumn("[bold]training[/bold]"), BarColumn(), TextColumn("{task.completed}/{task.total}"),
         TextColumn("loss {task.fields[loss]:.4f}"), TextColumn("{task.fields[rate]:.2f} it/s"),
@@ -81,6 +83,16 @@ def train(
         f"{result['parameters']:,} parameters, window {result['window']} frames, "
         f"{result['elapsed_seconds']:.0f} s of training"
     )
+
+
+def _warn_about_units(clip: Path, fps: float, codec_options: dict) -> None:
+    from ..runtime.bvh import read_bvh
+    from ..runtime.features import build_codec
+    from ..runtime.masks import units_warning_for
+
+    warning = units_warning_for(build_codec(read_bvh(clip), fps=fps, **codec_options))
+    if warning:
+        console.print(f"[yellow]warning:[/yellow] {warning}")
 
 
 @app.command()

@@ -57,8 +57,8 @@ def inspect(
     from ..runtime.animation import nominal_fps
     from ..runtime.bvh import read_bvh
     from ..runtime.features import build_codec, skeleton_size
-    from ..runtime.masks import body_halves
-    from ..runtime.rig import AXIS_NAMES, analyse_rig, units_warning
+    from ..runtime.masks import has_body_halves, units_warning_for
+    from ..runtime.rig import AXIS_NAMES, analyse_rig
 
     bvh = read_bvh(clip)
     codec = build_codec(bvh, fps=fps, units=units, contacts=_contacts(contacts), source_fps=source_fps, root=root, up=up)
@@ -69,12 +69,8 @@ def inspect(
     warnings = []
     if not 5 <= clip_fps <= 1000:
         warnings.append(f"frame time {bvh.frame_time:g} s ({clip_fps:g} fps) looks wrong; pass --source-fps")
-    try:
-        body_halves(codec)
-        humanoid = True
-    except SinMDMError:
-        humanoid = False
-    if units == "auto" and (warning := units_warning(codec.size, humanoid)):
+    humanoid = has_body_halves(codec)
+    if units == "auto" and (warning := units_warning_for(codec)):
         warnings.append(warning)
     info = {
         "file": str(clip),

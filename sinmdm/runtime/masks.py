@@ -100,3 +100,18 @@ def trajectory_channels(codec: MotionCodec, with_heading: bool = True) -> np.nda
     if with_heading:
         channels += list(layout.indices(("rotation",), {block.joint}))
     return np.asarray(sorted(channels), dtype=np.int64)
+
+
+def has_body_halves(codec: MotionCodec) -> bool:
+    try:
+        body_halves(codec)
+    except SinMDMError:
+        return False
+    return True
+
+
+def units_warning_for(codec: MotionCodec) -> str | None:
+    """A warning naming --units when a humanoid-shaped figure has an implausible size."""
+    from .rig import units_warning
+
+    return units_warning(codec.size, has_body_halves(codec))
