@@ -11,7 +11,7 @@ from typing import List, Optional
 import typer
 
 from ..runtime.errors import SinMDMError
-from .common import console, print_json
+from .common import RootOption, UpOption, console, print_json
 
 OUTPUT_SUFFIXES = (".gif", ".mp4", ".html")
 
@@ -30,6 +30,8 @@ def preview(
     labels: Optional[str] = typer.Option(None, "--labels", help="Comma-separated labels, one per clip (default: file names)."),
     size: Optional[str] = typer.Option(None, "--size", help="Image size WIDTHxHEIGHT in pixels (default 360x360 per clip)."),
     max_seconds: Optional[float] = typer.Option(None, "--max-seconds", help="Render at most this many seconds."),
+    root: Optional[str] = RootOption,
+    up: str = UpOption,
     force: bool = typer.Option(False, "--force", help="Overwrite existing output files."),
     as_json: bool = typer.Option(False, "--json", help="Print one JSON object."),
 ) -> None:
@@ -43,6 +45,9 @@ def preview(
             raise SinMDMError(f"{path} exists; pass --force to overwrite")
     label_list = _labels(labels, len(clips))
     image_size = _size(size)
+    from ..runtime.rig import parse_up
+
+    parse_up(up)  # refuse a bad --up before reading any clip
 
     from ..runtime.bvh import read_bvh
 
@@ -52,12 +57,12 @@ def preview(
         from ..preview.render import render_preview
 
         info = render_preview(bvhs, out, fps=source_fps, labels=label_list, size=image_size,
-                              max_seconds=max_seconds, units=units)
+                              max_seconds=max_seconds, units=units, root=root, up=up)
         summary.update(frames=info.frames, fps=info.fps, size=list(info.size))
     if html or suffix == ".html":
         from ..preview.viewer import write_viewer
 
-        write_viewer(bvhs, outputs[-1], labels=label_list, fps=source_fps, units=units)
+        write_viewer(bvhs, outputs[-1], labels=label_list, fps=source_fps, units=units, root=root, up=up)
     if as_json:
         print_json(summary)
         return

@@ -2,9 +2,13 @@
 viewer, and glTF (GLB) export.
 
 This module holds what every preview shares: the stick figure of a clip (joint
-and End Site world positions in metres, sampled at any time) and the lazy
-import of the optional libraries. The public functions live in the submodules
-and are re-exported lazily, so importing this package costs only numpy.
+and End Site world positions in metres, Y up, sampled at any time) and the lazy
+import of the optional libraries. Whatever the clip's layout, the figure is the
+same: static joints above the one that carries the character (a `joint_Root` at
+the floor, an `Armature` node) are left out, the camera follows that joint, and a
+Z-up clip is turned into the Y-up display frame (see runtime/rig.py). The public
+functions live in the submodules and are re-exported lazily, so importing this
+package costs only numpy.
 """
 
 from __future__ import annotations
@@ -25,6 +29,13 @@ if TYPE_CHECKING:
 
 EXTRA_MISSING = "previews need the preview extra: pip install 'sinmdm[preview]'"
 
+# World up axis (rig.py's index) -> the rotation that brings it to +Y, right-handed:
+# Z-up is turned -90 degrees about X, (x, y, z) -> (x, z, -y), so Blender's -Y
+# forward faces +Z, the usual BVH facing.
+UP_TO_Y = {
+    1: np.eye(3),
+    2: np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]]),
+}
 CAMERA_SMOOTHING_S = 0.5  # sigma of the Gaussian that smooths the root track a camera follows
 # One colour per clip, in order; the renders and the viewer use the same ones.
 CLIP_COLOURS = ("#e4572e", "#2e86de", "#17a673", "#8e44ad", "#f39c12", "#c0392b", "#16a085", "#2c3e50")
@@ -39,7 +50,8 @@ _EXPORTS = {
 }
 
 __all__ = [
-    "CLIP_COLOURS", "EXTRA_MISSING", "StickFigure", "import_extra", "nice_step", "smooth_track", "stick_figure", *_EXPORTS,
+    "CLIP_COLOURS", "EXTRA_MISSING", "UP_TO_Y", "StickFigure", "import_extra", "nice_step", "smooth_track",
+    "stick_figure", *_EXPORTS,
 ]
 
 
@@ -59,13 +71,15 @@ def import_extra(name: str) -> ModuleType:
 
 @dataclass(frozen=True)
 class StickFigure:
-    """A clip as points and bones: joints first, then End Sites."""
+    """A clip as points and bones: joints first, then End Sites (the clip's fixed
+    reference joints and their End Sites left out)."""
 
     label: str
     fps: float
     points: np.ndarray  # (T, P, 3) world positions in metres, Y up
     parents: np.ndarray  # (P,) the point each point hangs from, -1 for a root
-    root: int  # the point the camera follows
+    root: int  # the point the camera follows: the joint that carries the character
+    names: tuple[str, ...] = ()  # (P,) joint names, then "<parent>_end" for End Sites
 
     @property
     def frames(self) -> int:
@@ -91,13 +105,24 @@ class StickFigure:
         return self.points[before] * (1.0 - weight) + self.points[after] * weight
 
 
-def stick_figure(bvh: BVH, label: str | None = None, fps: float | None = None, units: str | float = "auto") -> StickFigure:
-    """World positions of a clip's joints and End Sites, in metres.
+def stick_figure(
+    bvh: BVH,
+    label: str | None = None,
+    fps: float | None = None,
+    units: str | float = "auto",
+    root: str | None = None,
+    up: str | None = None,
+) -> StickFigure:
+    """World positions of a clip's joints and End Sites, in metres, Y up.
 
-    `fps` overrides the clip's own frame rate (for files with a wrong Frame Time)."""
-    from ..runtime.animation import animation_from_bvh, nominal_fps
+    `fps` overrides the clip's own frame rate (for files with a wrong Frame Time);
+    `root` (a joint name) and `up` ('y', 'z' or 'auto') override what
+    runtime/rig.py detects. The static joints above the trajectory joint, and
+    every bone to them, are left out; a Z-up clip is turned to stand along +Y."""
+    from ..runtime.animation import Animation, animation_from_bvh, nominal_fps
     from ..runtime.features import unit_scale
     from ..runtime.kinematics import end_site_positions, forward_kinematics
+    from ..runtime.rig import analyse_rig
     from ..runtime.rotations import quat_to_matrix
 
     if bvh.frames == 0:
@@ -105,21 +130,37 @@ def stick_figure(bvh: BVH, label: str | None = None, fps: float | None = None, u
     if fps is not None and not (np.isfinite(fps) and fps > 0):
         raise SinMDMError(f"frame rate must be a number > 0, got {fps}")
     skeleton = bvh.skeleton
+    rate = float(fps) if fps is not None else nominal_fps(bvh.frame_time)
+    scale = unit_scale(skeleton, units)
     animation = animation_from_bvh(bvh)
+    rig = analyse_rig(Animation(skeleton, animation.rotations, animation.translations, rate), scale, root, up)
     rotations, positions = forward_kinematics(
         quat_to_matrix(animation.rotations), animation.translations, skeleton.parents
     )
     ends = end_site_positions(rotations, positions, skeleton.end_sites)
     parents = np.concatenate([skeleton.parents, [p for p, _ in skeleton.end_sites]]).astype(np.int64)
-    points = np.concatenate([positions, ends], axis=1) * unit_scale(skeleton, units)
+    names = list(skeleton.names) + [f"{skeleton.names[p]}_end" for p, _ in skeleton.end_sites]
+    points = np.concatenate([positions, ends], axis=1) * scale @ UP_TO_Y[rig.up_axis].T
+
+    # Leave out the fixed joints (a frame of reference only) and their End Sites;
+    # a point that hung from one becomes a root, so no bone reaches them.
+    fixed = np.zeros(len(parents), dtype=bool)
+    fixed[list(rig.fixed_joints)] = True
+    fixed[skeleton.num_joints:] = fixed[parents[skeleton.num_joints:]]
+    keep = np.flatnonzero(~fixed)
+    new_index = np.full(len(parents), -1, dtype=np.int64)
+    new_index[keep] = np.arange(len(keep))
+    kept_parents = np.where(parents[keep] >= 0, new_index[np.maximum(parents[keep], 0)], -1)
+    follow = rig.trajectory_joint if rig.trajectory_joint is not None else skeleton.roots[0]
     if label is None:
         label = "clip" if bvh.path is None else Path(bvh.path).stem
     return StickFigure(
         label=label,
-        fps=float(fps) if fps is not None else nominal_fps(bvh.frame_time),
-        points=points,
-        parents=parents,
-        root=skeleton.roots[0],
+        fps=rate,
+        points=np.ascontiguousarray(points[:, keep]),
+        parents=kept_parents,
+        root=int(new_index[follow]),
+        names=tuple(names[k] for k in keep),
     )
 
 

@@ -4,11 +4,16 @@ Layout of a written file:
 - one node per BVH joint (node name = joint name, BVH hierarchy, rest
   translation = OFFSET in metres, rest rotation identity), then one leaf node
   per End Site named "<parent>_end" (extras {"bvh_end_site": true}); a
-  skeleton with several ROOTs gets one plain node "skeleton" above them;
+  skeleton with several ROOTs gets one node "skeleton" above them, and so does
+  a Z-up clip (runtime/rig.py detects it, or `up` says so): there that node
+  turns it -90 degrees about X (extras {"sinmdm_up_axis": "z"}), so it stands
+  in glTF's Y-up world while the joints and the animation stay the file's own;
 - a skin listing all of those nodes, with the inverse bind matrices of the rest
   pose, so engines import an armature;
 - a skinned mesh of one octahedral "bone" per segment, weighted fully to the
-  segment's parent joint, so the skeleton is visible without an armature view;
+  segment's parent joint, so the skeleton is visible without an armature view
+  (none from the static reference joints above the one that carries the
+  character, such as a `joint_Root` at the floor: they stay joints, unseen);
 - one animation: a rotation channel (x, y, z, w) for every joint and a
   translation channel for every joint with position channels, LINEAR, at the
   times k / fps.
@@ -22,16 +27,18 @@ from typing import Any
 
 import numpy as np
 
-from ..runtime.animation import animation_from_bvh, nominal_fps, rest_positions
+from ..runtime.animation import Animation, animation_from_bvh, nominal_fps, rest_positions
 from ..runtime.atomic import write_bytes_atomic
 from ..runtime.bvh import BVH, Skeleton
 from ..runtime.errors import SinMDMError
 from ..runtime.features import unit_scale
 from ..runtime.kinematics import forward_kinematics
-from ..runtime.rotations import quat_fix_sign, quat_normalize, quat_to_matrix
-from . import CLIP_COLOURS, import_extra
+from ..runtime.rig import AXIS_NAMES, analyse_rig
+from ..runtime.rotations import matrix_to_quat, quat_fix_sign, quat_normalize, quat_to_matrix
+from . import CLIP_COLOURS, UP_TO_Y, import_extra
 
 END_SITE_MARK = "bvh_end_site"
+UP_AXIS_MARK = "sinmdm_up_axis"
 FLOAT, UNSIGNED_BYTE, UNSIGNED_SHORT, UNSIGNED_INT = 5126, 5121, 5123, 5125
 ARRAY_BUFFER, ELEMENT_ARRAY_BUFFER = 34962, 34963
 BONE_WIDTH = 0.08  # octahedron radius as a fraction of the bone's length
@@ -43,15 +50,29 @@ _NORMALIZED_MAX = {5120: 127.0, 5121: 255.0, 5122: 32767.0, 5123: 65535.0}
 # --------------------------------------------------------------------------- writing
 
 
-def write_glb(bvh: BVH, path: str | os.PathLike, units: str | float = "auto", fps: float | None = None) -> Path:
-    """Write `bvh` as a GLB file (atomically). `fps` overrides the clip's frame rate."""
+def write_glb(
+    bvh: BVH,
+    path: str | os.PathLike,
+    units: str | float = "auto",
+    fps: float | None = None,
+    root: str | None = None,
+    up: str | None = None,
+) -> Path:
+    """Write `bvh` as a GLB file (atomically). `fps` overrides the clip's frame rate;
+    `root` and `up` override what runtime/rig.py detects."""
     path = Path(path)
-    write_bytes_atomic(path, bvh_to_glb(bvh, units=units, fps=fps))
+    write_bytes_atomic(path, bvh_to_glb(bvh, units=units, fps=fps, root=root, up=up))
     return path
 
 
-def bvh_to_glb(bvh: BVH, units: str | float = "auto", fps: float | None = None) -> bytes:
-    """The GLB bytes of a clip: skeleton, skin, bone mesh and animation, in metres."""
+def bvh_to_glb(
+    bvh: BVH,
+    units: str | float = "auto",
+    fps: float | None = None,
+    root: str | None = None,
+    up: str | None = None,
+) -> bytes:
+    """The GLB bytes of a clip: skeleton, skin, bone mesh and animation, in metres, Y up."""
     gltf_module = import_extra("pygltflib")
     if bvh.frames == 0:
         raise SinMDMError(f"{bvh.path or 'the clip'} has no frames to export")
@@ -61,6 +82,7 @@ def bvh_to_glb(bvh: BVH, units: str | float = "auto", fps: float | None = None) 
     scale = unit_scale(skeleton, units)
     rate = float(fps) if fps is not None else nominal_fps(bvh.frame_time)
     animation = animation_from_bvh(bvh)
+    rig = analyse_rig(Animation(skeleton, animation.rotations, animation.translations, rate), scale, root, up)
     builder = _GLBBuilder(gltf_module)
 
     names = _node_names(skeleton)
@@ -89,15 +111,24 @@ def bvh_to_glb(bvh: BVH, units: str | float = "auto", fps: float | None = None) 
         inverseBindMatrices=builder.accessor(np.transpose(inverse_bind, (0, 2, 1)), "MAT4"),
     )
     roots = skeleton.roots
-    if len(roots) > 1:
+    if len(roots) > 1 or rig.up_axis != 1:
         # glTF wants all joints of a skin under one node; BVH allows several ROOTs.
-        nodes.append(gltf_module.Node(name="skeleton", children=list(roots)))
+        # A Z-up clip is stood up by this node, the joints keep the file's frame.
+        top = gltf_module.Node(name="skeleton", children=list(roots))
+        if rig.up_axis != 1:
+            top.rotation = [float(v) for v in _up_rotation_xyzw(rig.up_axis)]
+            top.extras = {UP_AXIS_MARK: AXIS_NAMES[rig.up_axis]}
+        nodes.append(top)
         roots = [len(nodes) - 1]
     skin.skeleton = roots[0]
 
     mesh_node = len(nodes)
     nodes.append(gltf_module.Node(name="bones", mesh=0, skin=0))
-    mesh = _bone_mesh(gltf_module, builder, rest_world, point_parents)
+    # The skinned mesh is in the joints' own (file) frame: the skin's joints carry
+    # the top node's turn, so the bones stand up with them.
+    shown = ~np.isin(np.arange(len(names)), rig.fixed_joints)
+    bone_parents = np.where(shown[np.maximum(point_parents, 0)], point_parents, -1)
+    mesh = _bone_mesh(gltf_module, builder, rest_world, bone_parents)
 
     times = np.arange(animation.frames, dtype=np.float64) / rate
     time_accessor = builder.accessor(times.astype(np.float32), "SCALAR", with_bounds=True)
@@ -174,6 +205,12 @@ class _GLBBuilder:
         gltf.buffers = [self.gltf.Buffer(byteLength=len(blob))]
         gltf.set_binary_blob(blob)
         return b"".join(gltf.save_to_bytes())
+
+
+def _up_rotation_xyzw(up_axis: int) -> np.ndarray:
+    """The glTF quaternion (x, y, z, w) that turns world `up_axis` to +Y."""
+    w, x, y, z = matrix_to_quat(UP_TO_Y[up_axis])
+    return np.array([x, y, z, w])
 
 
 def _node_names(skeleton: Skeleton) -> list[str]:
@@ -256,7 +293,12 @@ def read_glb(path: str | os.PathLike) -> dict:
     (T, J, 4; w, x, y, z, the package's order), translations (T, J, 3) and world
     positions (T, J, 3), in metres. Joints are the skin's joints except the
     nodes this module marks as End Sites; channels a joint lacks hold its rest
-    transform."""
+    transform. Positions follow from those rotations and translations alone (the
+    skeleton's own frame: a BVH written from them has these positions);
+    world_positions (T, J, 3) are where a glTF viewer shows the joints, with the
+    rest transforms of the nodes above them applied (such as the node that
+    stands a Z-up clip up). up_axis is the skeleton's own up axis as this module
+    marked it ("y" when unmarked)."""
     gltf_module = import_extra("pygltflib")
     path = Path(path)
     try:
@@ -320,6 +362,19 @@ def read_glb(path: str | os.PathLike) -> dict:
         else:
             translations[:, joint] = sampled
     _, positions = forward_kinematics(quat_to_matrix(rotations), translations, parents)
+    world_positions = positions.copy()
+    up_axis = "y"
+    for j, node in enumerate(joint_nodes):
+        if parents[j] >= 0:
+            continue
+        subtree = np.flatnonzero(_root_of(parents) == j)
+        above = np.eye(4)
+        ancestor = parent_of.get(node)
+        while ancestor is not None:
+            above = _node_matrix(gltf.nodes[ancestor]) @ above
+            up_axis = (gltf.nodes[ancestor].extras or {}).get(UP_AXIS_MARK, up_axis)
+            ancestor = parent_of.get(ancestor)
+        world_positions[:, subtree] = positions[:, subtree] @ above[:3, :3].T + above[:3, 3]
     return {
         "names": names,
         "parents": parents,
@@ -330,7 +385,30 @@ def read_glb(path: str | os.PathLike) -> dict:
         "rotations": rotations,
         "translations": translations,
         "positions": positions,
+        "world_positions": world_positions,
+        "up_axis": up_axis,
     }
+
+
+def _root_of(parents: np.ndarray) -> np.ndarray:
+    """(J,) the root joint above each joint (parents precede children)."""
+    roots = np.arange(len(parents))
+    for j, p in enumerate(parents):
+        if p >= 0:
+            roots[j] = roots[p]
+    return roots
+
+
+def _node_matrix(node: Any) -> np.ndarray:
+    """A node's rest transform as a 4x4 matrix (column vectors)."""
+    if node.matrix is not None:
+        return np.array(node.matrix, dtype=np.float64).reshape(4, 4).T  # glTF stores column-major
+    w, x, y, z = _node_rotation(node, Path())
+    matrix = np.eye(4)
+    matrix[:3, :3] = quat_to_matrix(quat_normalize(np.array([w, x, y, z], dtype=np.float64))) * np.array(
+        node.scale or [1.0, 1.0, 1.0], dtype=np.float64)
+    matrix[:3, 3] = _node_translation(node)
+    return matrix
 
 
 def _depth_first(gltf: Any, parent_of: dict[int, int]) -> list[int]:

@@ -48,13 +48,16 @@ def render_preview(
     size: tuple[int, int] | None = None,
     max_seconds: float | None = None,
     units: str | float = "auto",
+    root: str | None = None,
+    up: str | None = None,
 ) -> RenderInfo:
     """Render clips side by side (one panel each) to a .gif or .mp4.
 
     `fps` overrides the clips' frame rate; playback runs at that rate, divided
     by the smallest whole number that brings it under the format's limit
     (50 fps for GIF, 60 for MP4). Shorter clips hold their last pose. `size` is
-    the whole image in pixels (default 360 x 360 per panel)."""
+    the whole image in pixels (default 360 x 360 per panel). `root` and `up`
+    override the joint the camera follows and the up axis (see stick_figure)."""
     out = Path(out)
     suffix = out.suffix.lower()
     if suffix not in FORMATS:
@@ -65,7 +68,8 @@ def render_preview(
         raise SinMDMError(f"got {len(labels)} labels for {len(clips)} clips")
     if max_seconds is not None and not max_seconds > 0:
         raise SinMDMError(f"max seconds must be > 0, got {max_seconds}")
-    figures = [stick_figure(clip, None if labels is None else labels[i], fps, units) for i, clip in enumerate(clips)]
+    figures = [stick_figure(clip, None if labels is None else labels[i], fps, units, root, up)
+               for i, clip in enumerate(clips)]
     rate = playback_rate(max(f.fps for f in figures), FORMATS[suffix])
     seconds = max(f.seconds for f in figures)
     if max_seconds is not None:
@@ -118,7 +122,7 @@ class PanelView:
 
     figure: StickFigure
     points: np.ndarray  # (N, P, 3) metres, at the render times
-    target: np.ndarray  # (N, 3) camera target: smoothed root x/z on the floor
+    target: np.ndarray  # (N, 3) camera target: the smoothed x/z of the figure's root point, on the floor
     floor: float
 
 

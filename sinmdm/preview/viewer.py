@@ -27,10 +27,12 @@ def write_viewer(
     fps: float | None = None,
     units: str | float = "auto",
     title: str | None = None,
+    root: str | None = None,
+    up: str | None = None,
 ) -> Path:
     """Write one HTML file that plays the clips side by side in 3-D."""
     out_html = Path(out_html)
-    write_text_atomic(out_html, viewer_html(clips, labels=labels, fps=fps, units=units, title=title))
+    write_text_atomic(out_html, viewer_html(clips, labels=labels, fps=fps, units=units, title=title, root=root, up=up))
     return out_html
 
 
@@ -40,12 +42,15 @@ def viewer_html(
     fps: float | None = None,
     units: str | float = "auto",
     title: str | None = None,
+    root: str | None = None,
+    up: str | None = None,
 ) -> str:
     if not clips:
         raise SinMDMError("no clips to show")
     if labels is not None and len(labels) != len(clips):
         raise SinMDMError(f"got {len(labels)} labels for {len(clips)} clips")
-    figures = [stick_figure(clip, None if labels is None else labels[i], fps, units) for i, clip in enumerate(clips)]
+    figures = [stick_figure(clip, None if labels is None else labels[i], fps, units, root, up)
+               for i, clip in enumerate(clips)]
     payload = viewer_data(figures)
     template = resources.files(__package__).joinpath("viewer.html").read_text(encoding="utf-8")
     # "</" inside the JSON would end the <script> element early.
@@ -68,7 +73,8 @@ def viewer_data(figures: list[StickFigure]) -> dict:
     for i, figure in enumerate(figures):
         start = figure.points[0, figure.root]
         offset = np.array([(i - (len(figures) - 1) / 2) * spacing - start[0], 0.0, -start[2]])
-        shifted.append(StickFigure(figure.label, figure.fps, figure.points + offset, figure.parents, figure.root))
+        shifted.append(StickFigure(figure.label, figure.fps, figure.points + offset, figure.parents, figure.root,
+                                   figure.names))
 
     rate = max(f.fps for f in shifted)
     duration = max(f.seconds for f in shifted)
