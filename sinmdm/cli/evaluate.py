@@ -42,7 +42,9 @@ def eval_command(
     if as_json:
         print_json(result)
         return
-    Console().print(_table(result, reference))
+    console = Console()
+    console.print(_table(result, reference))
+    _print_plausibility(console, result.get("plausibility"), samples or [])
 
 
 def _table(result: dict, reference: Path) -> Table:
@@ -59,6 +61,32 @@ def _table(result: dict, reference: Path) -> Table:
     for key, label, higher, paper in METRICS:
         table.add_row(label, "↑ higher" if higher else "↓ lower", f"{result[key]:.2f}", f"{paper:.2f}")
     return table
+
+
+PLAUSIBILITY = (
+    ("root_step_max_ratio", "largest root step / clip's", None),
+    ("speed_distance_m_s", "root speed distance (m/s)", None),
+    ("backward_share", "frames walking backwards", "clip_backward_share"),
+    ("foot_skating_cm_s", "foot skating (cm/s)", "clip_foot_skating_cm_s"),
+    ("penetration_cm", "floor penetration (cm)", None),
+    ("jitter_ratio", "jerk / clip's", None),
+)
+
+
+def _print_plausibility(console: Console, plausible: dict | None, samples: list[Path]) -> None:
+    if not plausible or not plausible.get("aggregate"):
+        return
+    aggregate = plausible["aggregate"]
+    table = Table(title="what an animator sees (plausibility)")
+    table.add_column("metric")
+    table.add_column("samples", justify="right")
+    table.add_column("clip", justify="right", style="dim")
+    for key, label, clip_key in PLAUSIBILITY:
+        clip = f"{aggregate[clip_key]:.2f}" if clip_key else ("1.00" if key.endswith("_ratio") else "0.00")
+        table.add_row(label, f"{aggregate[key]:.2f}", clip)
+    console.print(table)
+    for path, row in zip(samples, plausible["samples"]):
+        console.print(f"{Path(path).name}: {row['verdict']}")
 
 
 def register(app: typer.Typer) -> None:

@@ -231,7 +231,8 @@ def evaluate_files(
     reference = read_bvh(reference_path)
     protocol = protocol_for(reference, preset, source_fps)
     reference_features = eval_features(reference, protocol, source_fps)
-    sample_features = [eval_features(read_bvh(path), protocol, source_fps) for path in sample_paths]
+    samples = [read_bvh(path) for path in sample_paths]
+    sample_features = [eval_features(sample, protocol, source_fps) for sample in samples]
 
     reference_minimum, sample_minimum = _minimum_frames()
     _check_length(f"reference {_where(reference)}", len(reference_features), reference_minimum, protocol.fps)
@@ -253,4 +254,13 @@ def evaluate_files(
         "joints": [names[j] for j in resolve_joints(reference.skeleton, protocol.joints, protocol.match)],
         "contact_joints": [names[j] for j in resolve_joints(reference.skeleton, protocol.contact_joints, protocol.match)],
         "contact_threshold": protocol.contact_threshold,
+        "plausibility": _plausibility(reference, samples, source_fps),
     }
+
+
+def _plausibility(reference: BVH, samples: list[BVH], source_fps: float | None) -> dict:
+    from .plausibility import plausibility
+
+    if source_fps is not None:
+        reference, *samples = [BVH(b.skeleton, 1.0 / source_fps, b.values, b.path) for b in [reference, *samples]]
+    return plausibility(reference, samples)

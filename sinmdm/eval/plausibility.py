@@ -1,0 +1,168 @@
+"""Plausibility: what an animator sees and the paper's metrics cannot (they read
+rotations and contact bits, not root motion). Per sample, against the clip, at
+30 fps in metres: root steps (teleports), speed distribution, walking against the
+facing direction, foot skating, floor penetration and jitter, and a one-line verdict.
+
+Joints are the REFERENCE codec's (trajectory joint, contacts, up axis), found by
+name in each sample, so other systems' outputs are scored the same way.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..runtime.animation import animation_from_bvh
+from ..runtime.bvh import BVH
+from ..runtime.contacts import contact_labels
+from ..runtime.features import MotionCodec, build_codec, resample_animation
+from ..runtime.kinematics import forward_kinematics
+from ..runtime.rotations import quat_to_matrix
+
+FPS = 30.0
+MOVING_SPEED = 0.1  # m/s: below this the root is standing, its direction means nothing
+FLOOR_TOLERANCE = 0.01  # m below the clip's floor before a joint counts as in it
+# Verdict thresholds: beyond these an animator sees the flaw at playback speed.
+TELEPORT_RATIO = 1.5  # largest root step vs the clip's largest
+BACKWARD_POINTS = 0.05  # share of frames walking backwards beyond the clip's own
+SKATING_RATIO, SKATING_SLACK_CM_S = 1.5, 2.0
+PENETRATION_CM = 2.0
+JITTER_RATIO = 2.0
+
+
+@dataclass(frozen=True)
+class Track:
+    positions: np.ndarray  # (T, J, 3) metres, the reference's joints by name
+    root_rotations: np.ndarray  # (T, 3, 3) global rotation of the trajectory joint
+
+
+def track(bvh: BVH, names: list[str], scale: float) -> Track:
+    animation = resample_animation(animation_from_bvh(bvh), FPS)
+    rotations, positions = forward_kinematics(quat_to_matrix(animation.rotations), animation.translations,
+                                              animation.skeleton.parents)
+    index = [bvh.skeleton.index(n) for n in names]
+    return Track(positions[:, index] * scale, rotations[:, index[0]])
+
+
+def _horizontal(up: int) -> list[int]:
+    return [a for a in range(3) if a != up]
+
+
+def root_steps(t: Track) -> np.ndarray:
+    return np.linalg.norm(np.diff(t.positions[:, 0], axis=0), axis=-1)
+
+
+def forward_axis(t: Track, up: int) -> np.ndarray | None:
+    """The trajectory joint's local axis the clip travels along (None if it stands)."""
+    velocity = np.diff(t.positions[:, 0], axis=0) * FPS
+    velocity[:, up] = 0.0
+    moving = np.linalg.norm(velocity, axis=-1) > MOVING_SPEED
+    if moving.mean() < 0.2:
+        return None
+    local = np.einsum("tba,tb->ta", t.root_rotations[1:][moving], velocity[moving])
+    return local.sum(axis=0) / max(np.linalg.norm(local.sum(axis=0)), 1e-12)
+
+
+def backward_share(t: Track, forward: np.ndarray | None, up: int) -> float:
+    if forward is None:
+        return 0.0
+    velocity = np.diff(t.positions[:, 0], axis=0) * FPS
+    velocity[:, up] = 0.0
+    facing = np.einsum("tab,b->ta", t.root_rotations[1:], forward)
+    facing[:, up] = 0.0
+    moving = np.linalg.norm(velocity, axis=-1) > MOVING_SPEED
+    return float(np.mean(moving & (np.sum(velocity * facing, axis=-1) < 0)))
+
+
+def skating_cm_s(t: Track, contacts: list[int], speed: float, up: int, floor: float, size: float) -> float:
+    if not contacts:
+        return 0.0
+    feet = t.positions[:, contacts]
+    planted = contact_labels(feet, FPS, speed).astype(bool) & (feet[..., up] - floor < 0.05 * size)
+    horizontal = np.linalg.norm(np.diff(feet[..., _horizontal(up)], axis=0), axis=-1) * FPS
+    planted = planted[1:] & planted[:-1]
+    return float(horizontal[planted].mean() * 100) if planted.any() else 0.0
+
+
+def jerk(t: Track) -> float:
+    return float(np.linalg.norm(np.diff(t.positions, n=3, axis=0), axis=-1).mean() * FPS**3) if len(t.positions) > 3 else 0.0
+
+
+def wasserstein_1d(a: np.ndarray, b: np.ndarray) -> float:
+    q = np.linspace(0, 1, 201)
+    return float(np.abs(np.quantile(a, q) - np.quantile(b, q)).mean()) if len(a) and len(b) else 0.0
+
+
+def _speeds(t: Track, up: int) -> np.ndarray:
+    return np.linalg.norm(np.diff(t.positions[:, 0][:, _horizontal(up)], axis=0), axis=-1) * FPS
+
+
+def _ratio(a: float, b: float) -> float:
+    return float(a / b) if b > 1e-12 else (1.0 if a <= 1e-12 else float("inf"))
+
+
+def score_sample(ref: Track, sample: Track, codec: MotionCodec, contacts: list[int], floor: float,
+                 forward: np.ndarray | None) -> dict:
+    up, size = codec.up_axis, codec.size
+    ref_steps, steps = root_steps(ref), root_steps(sample)
+    ref_skate = skating_cm_s(ref, contacts, codec.contact_speed, up, floor, size)
+    skate = skating_cm_s(sample, contacts, codec.contact_speed, up, floor, size)
+    depth = floor - sample.positions[..., up]
+    below = depth > FLOOR_TOLERANCE
+    scores = {
+        "root_step_max_ratio": _ratio(steps.max(initial=0), ref_steps.max(initial=0)),
+        "root_step_p99_ratio": _ratio(np.percentile(steps, 99) if len(steps) else 0, np.percentile(ref_steps, 99)),
+        "worst_step_frame": int(steps.argmax()) + 1 if len(steps) else 0,
+        "speed_distance_m_s": wasserstein_1d(_speeds(sample, up), _speeds(ref, up)),
+        "backward_share": backward_share(sample, forward, up),
+        "clip_backward_share": backward_share(ref, forward, up),
+        "foot_skating_cm_s": skate,
+        "clip_foot_skating_cm_s": ref_skate,
+        "penetration_cm": float(depth[below].mean() * 100) if below.any() else 0.0,
+        "penetration_share": float(below.any(axis=1).mean()),
+        "jitter_ratio": _ratio(jerk(sample), jerk(ref)),
+    }
+    scores["verdict"] = verdict(scores)
+    return scores
+
+
+def verdict(s: dict) -> str:
+    if s["root_step_max_ratio"] > TELEPORT_RATIO:
+        return (f"teleports: root jumps {s['root_step_max_ratio']:.1f}x the clip's largest per-frame step "
+                f"at frame {s['worst_step_frame']}")
+    if s["backward_share"] > s["clip_backward_share"] + BACKWARD_POINTS:
+        return f"walks backwards {100 * s['backward_share']:.0f} % of frames (clip: {100 * s['clip_backward_share']:.0f} %)"
+    if s["penetration_cm"] > PENETRATION_CM:
+        return f"sinks {s['penetration_cm']:.0f} cm into the floor on {100 * s['penetration_share']:.0f} % of frames"
+    if s["foot_skating_cm_s"] > SKATING_RATIO * s["clip_foot_skating_cm_s"] + SKATING_SLACK_CM_S:
+        return f"feet slide {s['foot_skating_cm_s']:.1f} cm/s while planted (clip: {s['clip_foot_skating_cm_s']:.1f})"
+    if s["jitter_ratio"] > JITTER_RATIO:
+        return f"jittery: {s['jitter_ratio']:.1f}x the clip's jerk"
+    return "plausible"
+
+
+def plausibility(reference: BVH, samples: list[BVH], units: str | float = "auto") -> dict:
+    """Per-sample scores and their aggregate (JSON-ready)."""
+    codec = build_codec(reference, fps=FPS, units=units)
+    if codec.trajectory_joint is None:
+        return {"samples": [], "aggregate": None, "note": "the clip has no trajectory joint"}
+    names = reference.skeleton.names
+    wanted = [names[codec.trajectory_joint]] + [names[j] for j in codec.contact_joints] + [
+        n for j, n in enumerate(names) if j != codec.trajectory_joint and j not in codec.contact_joints]
+    contacts = list(range(1, 1 + len(codec.contact_joints)))
+    ref = track(reference, wanted, codec.scale)
+    floor = float(np.percentile(ref.positions[..., codec.up_axis].min(axis=1), 2))
+    forward = forward_axis(ref, codec.up_axis)
+    rows = [score_sample(ref, track(s, wanted, codec.scale), codec, contacts, floor, forward) for s in samples]
+    aggregate = {
+        "root_step_max_ratio": max(r["root_step_max_ratio"] for r in rows),
+        **{k: float(np.mean([r[k] for r in rows])) for k in (
+            "root_step_p99_ratio", "speed_distance_m_s", "backward_share", "foot_skating_cm_s",
+            "penetration_cm", "penetration_share", "jitter_ratio")},
+        "clip_backward_share": rows[0]["clip_backward_share"],
+        "clip_foot_skating_cm_s": rows[0]["clip_foot_skating_cm_s"],
+        "implausible": sum(r["verdict"] != "plausible" for r in rows),
+    } if rows else None
+    return {"samples": rows, "aggregate": aggregate,
+            "trajectory_joint": names[codec.trajectory_joint], "up_axis": "xyz"[codec.up_axis]}
