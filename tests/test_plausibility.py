@@ -59,3 +59,19 @@ def test_eval_reports_plausibility(tmp_path, walk):
     out = json.loads(run_cli("sinmdm", "eval", str(real_clip("Joe_Walk-In-Circle.bvh")), str(sample), "--json",
                              check=True).stdout)
     assert out["plausibility"]["aggregate"]["implausible"] == 0
+
+
+def test_mixamo24_follows_the_papers_unit_rule(walk, tmp_path):
+    from sinmdm.eval.motion_features import eval_features, paper_scale, protocol_for
+    from .layouts import scaled
+
+    for name in ("Joe_Walk-In-Circle.bvh", "Joe_Baseball-Milling-Idle.bvh"):
+        clip = read_bvh(real_clip(name))
+        hips = clip.skeleton.index("mixamorig7:Hips")
+        expected = 0.01 if clip.skeleton.offsets[hips, 1] > 10 else 1.0
+        assert protocol_for(clip, "mixamo24").scale == paper_scale(clip.skeleton) == expected
+    metres = scaled(walk, 0.01)  # Hips OFFSET y now below 10: taken as metres, no 1/100
+    assert paper_scale(metres.skeleton) == 1.0 and paper_scale(walk.skeleton) == 0.01
+    protocol = protocol_for(walk, "mixamo24")
+    cm_labels, m_labels = eval_features(walk, protocol)[:, -4:], eval_features(metres, protocol)[:, -4:]
+    assert np.array_equal(cm_labels, m_labels)

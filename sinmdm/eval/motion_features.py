@@ -13,8 +13,11 @@ Presets:
 - ``mixamo24``: the paper's protocol (GANimator's ``bvh_parser`` and
   ``skeleton_database``): 24 Mixamo joints, each the first joint in file order
   whose name without its namespace (``mixamorig7:``) contains the pattern;
-  contacts on the four toe joints below 0.018 m per frame; 30 fps by dropping
-  frames.
+  contacts on the four toe joints below 0.018 per frame; 30 fps by dropping
+  frames. Units follow that code exactly, per file: numbers are divided by 100
+  when the Hips OFFSET y exceeds 10, else taken as they are, and the 0.018
+  threshold applies in those units (the project's own unit detection is used
+  by ``default`` only).
 """
 
 from __future__ import annotations
@@ -136,7 +139,7 @@ def protocol_for(
     if preset == "mixamo24":
         skeleton = reference.skeleton
         resolve_joints(skeleton, MIXAMO24_JOINTS, "contains", f"{where} (mixamo24 preset)")
-        scale = unit_scale(skeleton, units)
+        scale = unit_scale(skeleton, units) if units != "auto" else paper_scale(skeleton)
         return EvalProtocol(
             preset=preset,
             joints=MIXAMO24_JOINTS,
@@ -164,11 +167,20 @@ def _check_fps(source_fps: float | None) -> float | None:
     return source_fps
 
 
+def paper_scale(skeleton: Skeleton) -> float:
+    """GANimator's `bvh_parser` rule, per file: scale by 1/100 when the OFFSET y of the
+    first protocol joint (Hips) exceeds 10, else keep the file's numbers as metres."""
+    hips = resolve_joints(skeleton, MIXAMO24_JOINTS[:1], "contains", "mixamo24 preset")[0]
+    return 0.01 if skeleton.offsets[hips, 1] > 10 else 1.0
+
+
 def _file_scale(skeleton: Skeleton, protocol: EvalProtocol) -> float:
     """Metres per unit: the reference's, unless units are automatic and this
     file's character is clearly in other units (its size off by > 4x)."""
     if protocol.units != "auto":
         return protocol.scale
+    if protocol.preset == "mixamo24":
+        return paper_scale(skeleton)
     ratio = skeleton_size(skeleton) * protocol.scale / protocol.character_size
     if 1 / UNITS_MISMATCH_RATIO <= ratio <= UNITS_MISMATCH_RATIO:
         return protocol.scale
