@@ -6,6 +6,11 @@ metrics), beside the paper's coverage and diversity.
 
     python bench/layouts.py --work runs/layouts --results bench/results/layouts.json
 
+Each model is sampled twice, with the same seeds: `faithful` (the paper's sampler:
+no edge margin, no foot cleanup) and `default` (what `sinmdm-run sample` does: an
+8-frame margin cut off each end, foot-contact cleanup), so every improvement is
+measured against the baseline it replaces.
+
 The `as-before` rows force the old assumptions (`--root joint_Root --up y`: the
 static root as trajectory joint, the hips as an absolute translation) on the same
 clip, so the fix is measured against what it replaced. Results are appended per
@@ -48,6 +53,17 @@ def derived_clip(name: str, layout: str | None, work: Path) -> Path:
     return path
 
 
+VARIANTS = {"faithful": {"margin": 0, "cleanup": False}, "default": {}}
+KEYS = ("coverage", "global_diversity", "local_diversity")
+
+
+def score(clip: Path, paths: list[Path], preset: str) -> dict:
+    from sinmdm.eval.motion_features import evaluate_files
+
+    scores = evaluate_files(clip, paths, preset=preset)
+    return {**{k: scores[k] for k in KEYS}, "plausibility": scores.get("plausibility")}
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--work", type=Path, default=ROOT / "runs" / "layouts")
@@ -59,7 +75,6 @@ def main() -> None:
     parser.add_argument("--rescore", action="store_true", help="score the samples already written again")
     args = parser.parse_args()
 
-    from sinmdm.eval.motion_features import evaluate_files
     from sinmdm.runtime import GenerationRequest, generate, load_model, read_bvh, write_outputs
 
     results = json.loads(args.results.read_text()) if args.results.exists() else []
@@ -67,10 +82,9 @@ def main() -> None:
     if args.rescore:
         for row in results:
             clip = derived_clip(row["clip"], None if row["layout"] == "as shared" else row["layout"], args.work)
-            paths = sorted((args.work / row["tag"] / "samples").glob("*.bvh"))
-            scores = evaluate_files(clip, paths, preset=row["eval_preset"])
-            row.update({k: scores[k] for k in ("coverage", "global_diversity", "local_diversity")})
-            row["plausibility"] = scores.get("plausibility")
+            for variant, scores in row["variants"].items():
+                paths = sorted((args.work / row["tag"] / f"samples-{variant}").glob("*.bvh"))
+                scores.update(score(clip, paths, row["eval_preset"]))
         args.results.write_text(json.dumps(results, indent=2) + "\n")
         return
     for name, layout, extra, suffix in CASES:
@@ -88,18 +102,18 @@ def main() -> None:
         model = load_model(export_trained_window(run_dir, config["window"]))
         reference = read_bvh(clip)
         frames = 2 * round(reference.frames / reference.fps * model.codec.fps)
-        result = generate(model, GenerationRequest(frames=frames, count=args.samples, seed=0))
-        paths = write_outputs(model, result, run_dir / "samples", force=True)
-        scores = evaluate_files(clip, paths, preset=eval_protocol(name))
-        keys = ("coverage", "global_diversity", "local_diversity")
+        variants = {}
+        for variant, options in VARIANTS.items():
+            result = generate(model, GenerationRequest(frames=frames, count=args.samples, seed=0, **options))
+            paths = write_outputs(model, result, run_dir / f"samples-{variant}", force=True)
+            variants[variant] = {"options": options, **score(clip, paths, eval_protocol(name))}
         results.append({
             "tag": tag, "clip": name, "layout": layout or "as shared", "train_options": extra,
             "train_steps": config["step"], "width": args.width, "train_wall_seconds": round(train_wall, 1),
             "samples": args.samples, "frames": frames, "eval_preset": eval_protocol(name),
-            **{k: scores[k] for k in keys}, "plausibility": scores.get("plausibility"),
-            "date": time.strftime("%Y-%m-%d"),
+            "variants": variants, "date": time.strftime("%Y-%m-%d"),
         })
-        print(json.dumps(results[-1])[:2000])
+        print(json.dumps({k: v for k, v in results[-1].items() if k != "variants"}), flush=True)
         args.results.write_text(json.dumps(results, indent=2) + "\n")
 
 

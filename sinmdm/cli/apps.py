@@ -23,21 +23,22 @@ Out = typer.Option(Path("sinmdm_out"), "--out", "-o", help="Output directory.")
 Force = typer.Option(False, "--force", help="Overwrite existing files.")
 Json = typer.Option(False, "--json", help="Print a JSON summary.")
 Preview = typer.Option(False, "--preview", help="Also write a GIF preview (needs the preview extra).")
+Cleanup = typer.Option(True, "--cleanup/--no-cleanup", help="Pin the feet where the model predicts contacts (leg IK).")
 
 
 def _run(command: str, models, ref: Path, ref_fps, count, seed, sampler, steps, out, force, as_json, preview,
-         make_plan) -> None:
+         make_plan, cleanup: bool = True) -> None:
     from ..runtime.applications import load_reference, run_plan
     from ..runtime.generate import GenerationRequest, write_outputs
     from ..runtime.model import load_model
 
     model = load_model(models or None)
     plan = make_plan(model, lambda: load_reference(model, ref, ref_fps))
-    request = GenerationRequest(frames=plan.frames, count=count, seed=seed, sampler=sampler, steps=steps)
+    request = GenerationRequest(frames=plan.frames, count=count, seed=seed, sampler=sampler, steps=steps, cleanup=cleanup)
     result = run_plan(model, plan, request)
     written = write_outputs(model, result, out, name=command, preview=preview, force=force)
     summary = {"command": command, "reference": str(ref), "frames": plan.frames, "count": count, "seed": seed,
-               "steps": steps, "elapsed_seconds": round(result.seconds, 3), "files": [str(p) for p in written]}
+               "steps": steps, "cleanup": cleanup, "elapsed_seconds": round(result.seconds, 3), "files": [str(p) for p in written]}
     if as_json:
         print_json(summary)
     else:
@@ -62,12 +63,13 @@ def register(app: typer.Typer) -> None:
                   keep_end: float = typer.Option(0.25, "--keep-end", help="Share kept at the end."),
                   ramp: int = typer.Option(10, "--ramp", help="Frames of linear blend at each border."),
                   count: int = Count, seed: int = Seed, sampler: str = Sampler, steps: int = Steps,
-                  out: Path = Out, force: bool = Force, as_json: bool = Json, preview: bool = Preview) -> None:
+                  out: Path = Out, force: bool = Force, as_json: bool = Json, preview: bool = Preview,
+                  cleanup: bool = Cleanup) -> None:
         """Keep the start and end of a clip and generate the motion in between."""
         from ..runtime.applications import plan_inbetween
 
         _run("inbetween", models, ref, ref_fps, count, seed, sampler, steps, out, force, as_json, preview,
-             lambda m, load: plan_inbetween(m, load(), keep_start, keep_end, ramp))
+             lambda m, load: plan_inbetween(m, load(), keep_start, keep_end, ramp), cleanup)
 
     @app.command()
     def expand(models: Optional[list[Path]] = Models, ref: Path = Ref, ref_fps: Optional[float] = RefFps,
@@ -75,12 +77,13 @@ def register(app: typer.Typer) -> None:
                after: float = typer.Option(0.15, "--after", help="Share to add after."),
                ramp: int = typer.Option(6, "--ramp", help="Frames of linear blend at each border."),
                count: int = Count, seed: int = Seed, sampler: str = Sampler, steps: int = Steps,
-               out: Path = Out, force: bool = Force, as_json: bool = Json, preview: bool = Preview) -> None:
+               out: Path = Out, force: bool = Force, as_json: bool = Json, preview: bool = Preview,
+               cleanup: bool = Cleanup) -> None:
         """Extend a clip with new motion before and after it."""
         from ..runtime.applications import plan_expand
 
         _run("expand", models, ref, ref_fps, count, seed, sampler, steps, out, force, as_json, preview,
-             lambda m, load: plan_expand(m, load(), before, after, ramp))
+             lambda m, load: plan_expand(m, load(), before, after, ramp), cleanup)
 
     @app.command()
     def keyframes(models: Optional[list[Path]] = Models, ref: Path = Ref, ref_fps: Optional[float] = RefFps,
@@ -88,7 +91,8 @@ def register(app: typer.Typer) -> None:
                   every: Optional[int] = typer.Option(None, "--every", help="Keep every N-th frame instead."),
                   hold: int = typer.Option(0, "--hold", help="Also keep this many frames either side of each key."),
                   count: int = Count, seed: int = Seed, sampler: str = Sampler, steps: int = Steps,
-                  out: Path = Out, force: bool = Force, as_json: bool = Json, preview: bool = Preview) -> None:
+                  out: Path = Out, force: bool = Force, as_json: bool = Json, preview: bool = Preview,
+                  cleanup: bool = Cleanup) -> None:
         """Keep sparse key poses of a clip and generate the motion around them."""
         from ..runtime.applications import plan_keyframes
 
@@ -104,7 +108,8 @@ def register(app: typer.Typer) -> None:
                 keys = list(range(0, reference.frames, step))
             return plan_keyframes(m, reference, keys, hold)
 
-        _run("keyframes", models, ref, ref_fps, count, seed, sampler, steps, out, force, as_json, preview, plan)
+        _run("keyframes", models, ref, ref_fps, count, seed, sampler, steps, out, force, as_json, preview, plan,
+             cleanup)
 
     @app.command()
     def control(models: Optional[list[Path]] = Models, ref: Path = Ref, ref_fps: Optional[float] = RefFps,
@@ -112,7 +117,8 @@ def register(app: typer.Typer) -> None:
                 subtree: Optional[str] = typer.Option(None, "--subtree", help="Keep this joint and everything below it."),
                 trajectory: bool = typer.Option(False, "--trajectory", help="Keep the root path (x/z motion and heading); the reference may be any skeleton."),
                 count: int = Count, seed: int = Seed, sampler: str = Sampler, steps: int = Steps,
-                out: Path = Out, force: bool = Force, as_json: bool = Json, preview: bool = Preview) -> None:
+                out: Path = Out, force: bool = Force, as_json: bool = Json, preview: bool = Preview,
+                cleanup: bool = Cleanup) -> None:
         """Keep some joints (or the root path) of a clip and generate the rest of the body."""
         from ..runtime.applications import load_reference, load_trajectory, plan_control
 
@@ -120,7 +126,8 @@ def register(app: typer.Typer) -> None:
             reference = load_trajectory(m, ref, ref_fps) if trajectory and not (joints or subtree) else load_reference(m, ref, ref_fps)
             return plan_control(m, reference, joints, subtree, trajectory)
 
-        _run("control", models, ref, ref_fps, count, seed, sampler, steps, out, force, as_json, preview, plan)
+        _run("control", models, ref, ref_fps, count, seed, sampler, steps, out, force, as_json, preview, plan,
+             cleanup)
 
     @app.command()
     def harmonize(models: Optional[list[Path]] = Models, ref: Path = Ref, ref_fps: Optional[float] = RefFps,
@@ -129,7 +136,8 @@ def register(app: typer.Typer) -> None:
                   factor: int = typer.Option(2, "--factor", help="Low-pass down/up-sampling factor N of ILVR."),
                   border: int = typer.Option(10, "--border", help="Frames around a pasted portion that are harmonized too."),
                   count: int = Count, seed: int = Seed, sampler: str = Sampler, steps: int = Steps,
-                  out: Path = Out, force: bool = Force, as_json: bool = Json, preview: bool = Preview) -> None:
+                  out: Path = Out, force: bool = Force, as_json: bool = Json, preview: bool = Preview,
+                  cleanup: bool = Cleanup) -> None:
         """Restyle a clip with the model's motion (style transfer), or blend a pasted portion in."""
         from ..runtime.applications import plan_harmonize
         from ..runtime.generate import GenerationRequest, generate
@@ -143,4 +151,5 @@ def register(app: typer.Typer) -> None:
                 base = generate(m, request).features[0]
             return plan_harmonize(m, reference, factor, span, joints, base, border)
 
-        _run("harmonize", models, ref, ref_fps, count, seed, sampler, steps, out, force, as_json, preview, plan)
+        _run("harmonize", models, ref, ref_fps, count, seed, sampler, steps, out, force, as_json, preview, plan,
+             cleanup)

@@ -11,7 +11,7 @@ from rich.table import Table
 from rich.tree import Tree
 
 from ..runtime.errors import SinMDMError
-from ..runtime.sampler import DEFAULT_STEPS as DEFAULT_STEPS_CLI
+from ..runtime.sampler import DEFAULT_STEPS as DEFAULT_STEPS_CLI, EDGE_MARGIN
 from .common import RootOption, UpOption, console, print_json, run_app
 
 app = typer.Typer(
@@ -179,6 +179,12 @@ def sample(
     steps: int = typer.Option(DEFAULT_STEPS_CLI, "--steps", help="Denoising steps (1000 = the paper's full chain)."),
     eta: float = typer.Option(0.0, "--eta", help="DDIM noise (0 = deterministic)."),
     hop: Optional[int] = typer.Option(None, "--hop", help="Frames between overlapping windows (default: half a window)."),
+    loop: bool = typer.Option(False, "--loop", help="A seamless cycle: the file holds T frames whose last flows into the "
+                              "first; the root moves by the loop displacement (summary) each cycle. At least one window long."),
+    margin: int = typer.Option(EDGE_MARGIN, "--margin", help="Frames sampled beyond each end and cut off "
+                               "(steadier first and last frames; 0 = the paper's sampler)."),
+    cleanup: bool = typer.Option(True, "--cleanup/--no-cleanup", help="Pin the feet (contact joints) where the model "
+                                 "predicts contacts, with IK on the legs (removes foot sliding)."),
     out: Path = typer.Option(Path("sinmdm_out"), "--out", "-o", help="Output directory."),
     name: str = typer.Option("sample", "--name", help="File name prefix."),
     fmt: str = typer.Option("bvh", "--format", help="bvh or glb (glb needs the preview extra)."),
@@ -194,7 +200,8 @@ def sample(
 
     model = load_model(models or None, threads=threads)
     length = _length(model, seconds, frames, force)
-    request = GenerationRequest(frames=length, count=count, seed=seed, sampler=sampler, steps=steps, eta=eta, hop=hop)
+    request = GenerationRequest(frames=length, count=count, seed=seed, sampler=sampler, steps=steps, eta=eta, hop=hop,
+                                loop=loop, cleanup=cleanup, margin=margin)
     with _progress(f"sampling {count} x {length} frames") as progress:
         task = progress.add_task("sample", total=steps if steps else len(model.alphas_cumprod))
         result = generate(model, request, progress=lambda done, total: progress.update(task, completed=done, total=total))
@@ -202,14 +209,24 @@ def sample(
     summary = {
         "model": [str(d.path) for d in model.denoisers.values()],
         "frames": length, "fps": model.codec.fps, "seconds": length / model.codec.fps,
-        "count": count, "seed": seed, "sampler": sampler, "steps": steps,
+        "count": count, "seed": seed, "sampler": sampler, "steps": steps, "cleanup": cleanup,
         "elapsed_seconds": round(result.seconds, 3), "files": [str(p) for p in written],
     }
+    if loop:
+        from ..runtime.rig import AXIS_NAMES
+
+        axes = [AXIS_NAMES[a] for a in model.codec.horizontal_axes]
+        # per clip: root metres per cycle along the root's horizontal axes (its parent's frame)
+        summary["loop"] = True
+        summary["loop_displacement_m"] = [dict(zip(axes, map(float, d))) for d in result.loop_displacement]
     if as_json:
         print_json(summary)
     else:
         console.print(f"wrote {len(written)} file(s) to [bold]{out}[/bold]: {count} x {length} frames "
                       f"({length / model.codec.fps:.1f} s at {model.codec.fps:g} fps) in {result.seconds:.2f} s")
+        if loop:
+            moves = "; ".join(", ".join(f"{a} {v:+.3f}" for a, v in d.items()) for d in summary["loop_displacement_m"])
+            console.print(f"loops of {length} frames; the root moves per cycle (m): {moves}")
 
 
 MAX_SECONDS = 3600.0

@@ -29,6 +29,10 @@ BACKWARD_POINTS = 0.05  # share of frames walking backwards beyond the clip's ow
 SKATING_RATIO, SKATING_SLACK_CM_S = 1.5, 2.0
 PENETRATION_CM = 2.0
 JITTER_RATIO = 2.0
+# A root step under this share of the character's size per frame is never a teleport:
+# the floor under the clip's own steps, so a clip whose root barely moves (an idle)
+# does not turn a few millimetres of sway into a "500x" jump.
+STEP_FLOOR = 0.005
 
 
 @dataclass(frozen=True)
@@ -106,13 +110,15 @@ def score_sample(ref: Track, sample: Track, codec: MotionCodec, contacts: list[i
                  forward: np.ndarray | None) -> dict:
     up, size = codec.up_axis, codec.size
     ref_steps, steps = root_steps(ref), root_steps(sample)
+    floor_step = STEP_FLOOR * size
     ref_skate = skating_cm_s(ref, contacts, codec.contact_speed, up, floor, size)
     skate = skating_cm_s(sample, contacts, codec.contact_speed, up, floor, size)
     depth = floor - sample.positions[..., up]
     below = depth > FLOOR_TOLERANCE
     scores = {
-        "root_step_max_ratio": _ratio(steps.max(initial=0), ref_steps.max(initial=0)),
-        "root_step_p99_ratio": _ratio(np.percentile(steps, 99) if len(steps) else 0, np.percentile(ref_steps, 99)),
+        "root_step_max_ratio": _ratio(steps.max(initial=0), max(ref_steps.max(initial=0), floor_step)),
+        "root_step_p99_ratio": _ratio(np.percentile(steps, 99) if len(steps) else 0,
+                                      max(np.percentile(ref_steps, 99) if len(ref_steps) else 0, floor_step)),
         "worst_step_frame": int(steps.argmax()) + 1 if len(steps) else 0,
         "speed_distance_m_s": wasserstein_1d(_speeds(sample, up), _speeds(ref, up)),
         "backward_share": backward_share(sample, forward, up),

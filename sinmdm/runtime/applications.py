@@ -15,7 +15,7 @@ from .bvh import read_bvh
 from .errors import SinMDMError
 from .animation import Animation, animation_from_bvh, nominal_fps
 from .features import build_codec, check_same_skeleton, skeleton_size
-from .generate import GenerationRequest, GenerationResult, generate
+from .generate import GenerationRequest, GenerationResult, decode_clip, generate
 from .masks import feature_channels, frame_ramp, joint_names, trajectory_channels
 from .model import MotionModel
 from .sampler import Guide
@@ -194,9 +194,10 @@ def plan_harmonize(model: MotionModel, reference: Reference, factor: int = 2, fr
     return Plan(Guide(reference=composite, keep=keep, harmonize=region, factor=factor), frames, reference.start, reference=reference)
 
 
-def land_on_reference(model: MotionModel, plan: Plan, result: GenerationResult) -> GenerationResult:
+def land_on_reference(model: MotionModel, plan: Plan, result: GenerationResult, cleanup: bool = True) -> GenerationResult:
     """After in-betweening, spread the root's x/z drift over the generated gap so the
-    kept end lands where it stands in the reference."""
+    kept end lands where it stands in the reference (clips re-decoded, with the contact
+    cleanup when `cleanup`)."""
     if plan.fix_root is None or plan.reference is None:
         return result
     root = model.codec.layout.indices(("root",))
@@ -211,11 +212,12 @@ def land_on_reference(model: MotionModel, plan: Plan, result: GenerationResult) 
             want = ref[gap_start + 1 : gap_stop + 1, channel].sum()
             got = sample[gap_start + 1 : gap_stop + 1, channel].sum()
             sample[gap_start + 1 : gap_stop + 1, channel] += (want - got) / (gap_stop - gap_start)
-    clips = [model.codec.decode_bvh(f, plan.start) for f in features]
+    clips = [decode_clip(model, f, plan.start, cleanup, keep=plan.guide.keep) for f in features]
     return GenerationResult(features, clips, result.seeds, result.seconds)
 
 
 def run_plan(model: MotionModel, plan: Plan, request: GenerationRequest, progress=None) -> GenerationResult:
-    request = GenerationRequest(plan.frames, request.count, request.seed, request.sampler, request.steps, request.eta, request.hop)
+    request = GenerationRequest(plan.frames, request.count, request.seed, request.sampler, request.steps, request.eta, request.hop,
+                                cleanup=request.cleanup, margin=request.margin)
     result = generate(model, request, guide=plan.guide, start=plan.start, progress=progress)
-    return land_on_reference(model, plan, result)
+    return land_on_reference(model, plan, result, cleanup=request.cleanup)

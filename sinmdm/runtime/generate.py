@@ -18,12 +18,13 @@ from typing import Callable
 
 import numpy as np
 
-from .animation import animation_from_bvh, global_positions
+from .animation import animation_from_bvh, animation_to_bvh, global_positions
 from .atomic import check_writable_dir
 from .bvh import BVH, format_bvh
+from .cleanup import cleanup_contacts
 from .errors import SinMDMError
 from .model import MotionModel
-from .sampler import DEFAULT_STEPS, Guide, sample_features
+from .sampler import DEFAULT_STEPS, EDGE_MARGIN, Guide, cycle_displacement, fit_guide, sample_features
 
 
 @dataclass(frozen=True)
@@ -35,6 +36,11 @@ class GenerationRequest:
     steps: int | None = DEFAULT_STEPS
     eta: float = 0.0
     hop: int | None = None
+    # a seamless cycle of `frames` frames (at least one window): the last frame flows into
+    # the first, the root moving by `GenerationResult.loop_displacement` per cycle
+    loop: bool = False
+    cleanup: bool = True  # pin the contact joints where the model predicts contacts (cleanup.py)
+    margin: int = EDGE_MARGIN  # frames sampled beyond each end and cut off (0: the paper's sampler)
 
 
 @dataclass
@@ -43,6 +49,7 @@ class GenerationResult:
     clips: list[BVH]
     seeds: list[int]
     seconds: float
+    loop_displacement: np.ndarray | None = None  # loops: (count, 2) root metres per cycle, codec.horizontal_axes
 
 
 def generate(
@@ -57,11 +64,26 @@ def generate(
     features = sample_features(
         model, request.frames, count=request.count, seed=request.seed, sampler=request.sampler,
         steps=request.steps, eta=request.eta, hop=request.hop, guide=guide, progress=progress,
+        loop=request.loop, margin=request.margin,
     )
     origin = model.start_position if start is None else start
-    clips = [model.codec.decode_bvh(f, origin) for f in features]
+    displacement = cycle_displacement(model.codec, features) if request.loop else None
+    keep = None if guide is None or guide.keep is None else guide.keep
+    clips = [decode_clip(model, f, origin, request.cleanup, None if displacement is None else displacement[i], keep)
+             for i, f in enumerate(features)]
     seeds = [request.seed + i for i in range(request.count)]
-    return GenerationResult(features, clips, seeds, time.perf_counter() - began)
+    return GenerationResult(features, clips, seeds, time.perf_counter() - began, loop_displacement=displacement)
+
+
+def decode_clip(model: MotionModel, features: np.ndarray, start: np.ndarray | None, cleanup: bool = True,
+                loop_displacement: np.ndarray | None = None, keep: np.ndarray | None = None) -> BVH:
+    """One sample's features (frames, F) as a BVH clip, its contacts cleaned up when asked
+    (except where `keep`, a guide's (F, frames) kept features, holds the legs)."""
+    animation = model.codec.decode(features, start)
+    if cleanup:
+        kept = None if keep is None else np.broadcast_to(fit_guide(keep, len(features)), features.shape[::-1]).T
+        animation = cleanup_contacts(animation, model.codec, features, loop_displacement, kept)
+    return animation_to_bvh(animation)
 
 
 def _npz_bytes(model: MotionModel, features: np.ndarray, clip: BVH) -> bytes:

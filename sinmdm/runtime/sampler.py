@@ -4,6 +4,14 @@ mask applied to x0_hat, ILVR harmonization applied to x_t).
 
 Arrays are (samples, features, frames). Each sample has its own random stream
 (seed + i), so any sample of a crowd reproduces on its own.
+
+Loops (`loop=True`): the sequence is a circle of T frames. The windows tile the
+circle (those that cross the end take frames from the start), the cross-fade is
+normalised on the circle, so every frame, the wrap included, is denoised in the
+context of its neighbours across the seam. The result is a cycle of T frames:
+frame T (not part of it) is frame 0 again, displaced by the cycle's root motion
+(`cycle_displacement`: the sum of the root's per-frame velocities, frame 0's
+being the step across the wrap), which a game engine applies once per cycle.
 """
 
 from __future__ import annotations
@@ -19,6 +27,10 @@ from .schedule import Schedule
 
 SAMPLERS = ("ddpm", "ddim")
 DEFAULT_STEPS = 50
+# Frames sampled beyond each end and cut off: a window's outermost frames are denoised
+# without context (the UNet's padding), and on short-trained models the first and last
+# 2-3 frames wobble (the height alternating by up to 16 cm). 0 is the paper's sampler.
+EDGE_MARGIN = 8
 HARMONIZE_STOP = 0.02  # ILVR guidance stops for the last 2 % of the schedule (t <= 20 of 1000)
 MAX_WINDOWS_PER_CALL = 256
 
@@ -48,6 +60,16 @@ def window_starts(frames: int, window: int, hop: int) -> np.ndarray:
     return np.asarray(starts)
 
 
+def circular_window_starts(frames: int, window: int, hop: int) -> np.ndarray:
+    """Window starts tiling a circle of `frames` (>= window) frames: K = ceil(frames / hop)
+    starts spread evenly (exactly every `hop` when it divides `frames`), so that
+    consecutive starts, the pair across the wrap included, are at most `hop` apart."""
+    if frames < window:
+        raise SinMDMError(f"a loop must be at least one window ({window} frames) long, got {frames}")
+    count = -(-frames // hop)
+    return (np.arange(count) * frames) // count
+
+
 def blend_weights(window: int) -> np.ndarray:
     """A tent over the window: overlapping windows cross-fade linearly."""
     i = np.arange(window)
@@ -68,24 +90,51 @@ def low_pass(x: np.ndarray, factor: int) -> np.ndarray:
     return up.reshape(x.shape[:-1] + (frames,))
 
 
+def _loop_denoiser(model: MotionModel, frames: int):
+    """The window a loop of `frames` uses: the usual one when it fits in the loop,
+    else the largest window that does."""
+    denoiser = model.denoiser_for(frames)
+    if denoiser.window <= frames:
+        return denoiser
+    fitting = [w for w in model.windows if w <= frames]
+    if not fitting:
+        shortest = model.windows[0]
+        raise SinMDMError(
+            f"--loop needs at least one window of the model: {shortest} frames "
+            f"({shortest / model.codec.fps:.2f} s at {model.codec.fps:g} fps), got {frames}"
+        )
+    return model.denoisers[fitting[-1]]
+
+
 class WindowedDenoiser:
     """x0_hat for whole sequences from a fixed-window graph: overlapping windows,
-    all of them in one batched call per step, blended with cross-fades."""
+    all of them in one batched call per step, blended with cross-fades. With
+    `loop` the sequence is circular: windows wrap around the end (modular frame
+    indices) and the blend normaliser is computed on the circle."""
 
-    def __init__(self, model: MotionModel, frames: int, hop: int | None = None):
-        self.denoiser = model.denoiser_for(frames)
+    def __init__(self, model: MotionModel, frames: int, hop: int | None = None, loop: bool = False):
+        self.denoiser = _loop_denoiser(model, frames) if loop else model.denoiser_for(frames)
         self.window = self.denoiser.window
-        self.frames = max(frames, self.window)
+        self.loop = loop
+        self.frames = frames if loop else max(frames, self.window)
         self.hop = hop or max(self.window // 2, 1)
         if not 1 <= self.hop <= self.window:
             raise SinMDMError(f"hop must be between 1 and the window ({self.window}), got {self.hop}")
-        self.starts = window_starts(self.frames, self.window, self.hop)
+        if loop:
+            self.starts = circular_window_starts(self.frames, self.window, self.hop)
+        else:
+            self.starts = window_starts(self.frames, self.window, self.hop)
         self.weights = blend_weights(self.window)
+        self.index = (self.starts[:, None] + np.arange(self.window)[None, :]) % self.frames  # (K, W)
+        # where each window's frames go: a slice, or modular indices for a window across the wrap
+        self.spans = [
+            slice(s, s + self.window) if s + self.window <= self.frames else self.index[k]
+            for k, s in enumerate(self.starts)
+        ]
         coverage = np.zeros(self.frames)
-        for s in self.starts:
-            coverage[s : s + self.window] += self.weights
+        for span in self.spans:
+            coverage[span] += self.weights
         self.normaliser = 1.0 / coverage
-        self.index = self.starts[:, None] + np.arange(self.window)[None, :]  # (K, W)
 
     def __call__(self, x_t: np.ndarray, t: int) -> np.ndarray:
         samples, features, _ = x_t.shape
@@ -98,15 +147,30 @@ class WindowedDenoiser:
         ])
         out = out.reshape(samples, len(self.starts), features, self.window).astype(np.float64) * self.weights
         blended = np.zeros(x_t.shape)
-        for k, s in enumerate(self.starts):
-            blended[:, :, s : s + self.window] += out[:, k]
+        for k, span in enumerate(self.spans):
+            blended[:, :, span] += out[:, k]
         return blended * self.normaliser
 
 
-def _fit(array: np.ndarray | None, frames: int) -> np.ndarray | None:
-    """Pad (with zeros: 'not kept') or cut a (features, frames) guide array to `frames`."""
+def cycle_displacement(codec, features: np.ndarray) -> np.ndarray:
+    """(..., 2) metres: how far the trajectory joint moves per cycle of a loop, along
+    its two horizontal axes (`codec.horizontal_axes`, in its parent's frame) from
+    (..., frames, F) features: the sum of the per-frame root velocities, frame 0's
+    being the step from the last frame across the wrap. Zeros without a trajectory joint."""
+    features = np.asarray(features, dtype=np.float64)
+    if codec.trajectory_joint is None:
+        return np.zeros(features.shape[:-2] + (2,))
+    dx, _, dz = codec.layout.indices(("root",))
+    return np.stack([features[..., dx].sum(axis=-1), features[..., dz].sum(axis=-1)], axis=-1)
+
+
+def fit_guide(array: np.ndarray | None, frames: int, before: int = 0) -> np.ndarray | None:
+    """Pad (with zeros: 'not kept') or cut a (features, frames) guide array to `frames`,
+    after `before` zero frames."""
     if array is None:
         return None
+    if before:
+        array = np.concatenate([np.zeros(array.shape[:-1] + (before,)), array], axis=-1)
     if array.shape[-1] >= frames:
         return array[..., :frames]
     pad = np.zeros(array.shape[:-1] + (frames - array.shape[-1],))
@@ -124,8 +188,13 @@ def sample_features(
     hop: int | None = None,
     guide: Guide | None = None,
     progress: Callable[[int, int], None] | None = None,
+    loop: bool = False,
+    margin: int = 0,
 ) -> np.ndarray:
-    """(count, frames, F) float32 motion features."""
+    """(count, frames, F) float32 motion features; with `loop`, a cycle of `frames`
+    frames (at least one window) whose last frame flows into its first. `margin`
+    frames are sampled before and after the motion (guides extended by 'not kept')
+    and cut off; a loop has no ends and ignores it."""
     if frames < 1:
         raise SinMDMError("the length must be at least 1 frame")
     if count < 1:
@@ -134,7 +203,12 @@ def sample_features(
         raise SinMDMError(f"unknown sampler '{sampler}': use {' or '.join(SAMPLERS)}")
     if steps is not None and not 1 <= steps <= len(model.alphas_cumprod):
         raise SinMDMError(f"--steps must be between 1 and {len(model.alphas_cumprod)}")
-    denoise = WindowedDenoiser(model, frames, hop)
+    if loop and guide is not None:
+        raise SinMDMError("--loop cannot be combined with guides (applications): sample a loop without one")
+    if margin < 0:
+        raise SinMDMError(f"--margin must be at least 0, got {margin}")
+    margin = 0 if loop else margin
+    denoise = WindowedDenoiser(model, frames + 2 * margin, hop, loop=loop)
     length = denoise.frames
     chain = Schedule.from_alphas_cumprod(model.alphas_cumprod, steps)
     c1, c2, log_var = chain.posterior()
@@ -146,9 +220,9 @@ def sample_features(
 
     reference = keep = region = None
     if guide is not None:
-        reference = _fit(np.asarray(guide.reference, dtype=np.float64), length)
-        keep = _fit(guide.keep, length)
-        region = _fit(guide.harmonize, length)
+        reference = fit_guide(np.asarray(guide.reference, dtype=np.float64), length, margin)
+        keep = fit_guide(guide.keep, length, margin)
+        region = fit_guide(guide.harmonize, length, margin)
 
     total = len(chain.timesteps)
     for i in reversed(range(total)):
@@ -173,4 +247,4 @@ def sample_features(
             x = x + region * (low_pass(noisy_ref, guide.factor) - low_pass(x, guide.factor))
         if progress:
             progress(total - i, total)
-    return x[:, :, :frames].transpose(0, 2, 1).astype(np.float32)
+    return x[:, :, margin : margin + frames].transpose(0, 2, 1).astype(np.float32)

@@ -1,0 +1,408 @@
+"""Foot-contact cleanup: pin planted joints where the model says they touch the floor.
+
+Sampled motion carries its own contact labels (one feature channel per contact
+joint). `cleanup_contacts` turns them into horizontal targets and bends the legs
+with numpy IK so that planted joints stop sliding:
+
+1. Intervals: runs of frames with label > 0.5, at least `MIN_CONTACT_FRAMES` long.
+   Inside a run the joint's target is its horizontal position averaged over the
+   run; its height is kept (only sliding is removed, the foot is never pushed into
+   the floor). The IK offset (target - position) fades out over `BLEND_FRAMES`
+   after a run and in over `BLEND_FRAMES` before the next one (cosine ramps,
+   normalised where two ramps overlap), so nothing pops.
+2. Legs: contact joints on one chain (Mixamo's Foot, ToeBase, Toe_End) form one
+   leg. Its effector is the highest of them, moved up past short end bones (a toe
+   whose bone is shorter than half the bone above it hands over to the ankle).
+   A two-bone analytic solve on the effector's two nearest rotating ancestors
+   ("hip" and "knee") moves the effector to its target while keeping its world
+   orientation, so the joints below it translate rigidly with it; each lower
+   contact joint is then aimed at its own target by its nearest rotating ancestor
+   (the ankle for a toe). A leg with only a toe planted (heel off) is pinned by the
+   ankle's translation, a fully planted foot by both steps: that is why this beats
+   solving only the highest or only the lowest joint (whichever is not solved for
+   keeps sliding while the other is planted).
+
+Only local rotations of joints with three rotation channels change: bone lengths
+are exact, joints outside the solved legs do not move, and a motion without
+contacts comes back unchanged. Everything is vectorised over frames.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .animation import Animation
+from .kinematics import forward_kinematics
+from .rotations import matrix_to_quat, quat_to_matrix
+
+CONTACT_THRESHOLD = 0.5  # a label above this is "in contact"
+MIN_CONTACT_FRAMES = 2  # shorter runs are noise
+BLEND_FRAMES = 4  # frames of fade in before and out after a contact run
+SHORT_BONE = 0.5  # an end bone shorter than this share of the bone above it is a toe, not a shin
+MAX_SLIDE = 0.25  # a "contact" over which the joint travels further (share of the character's size) is a label error
+_EPS = 1e-9
+
+
+# ------------------------------------------------------------------ rotations
+def _unit(v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Unit vectors (zero where v is ~0) and norms."""
+    norm = np.linalg.norm(v, axis=-1, keepdims=True)
+    return np.where(norm > _EPS, v / np.maximum(norm, _EPS), 0.0), norm[..., 0]
+
+
+def axis_angle_matrix(axis: np.ndarray, angle: np.ndarray) -> np.ndarray:
+    """(..., 3, 3) Rodrigues rotations about unit axes (..., 3); a zero axis gives identity."""
+    x, y, z = np.moveaxis(axis, -1, 0)
+    zero = np.zeros_like(x)
+    k = np.stack([zero, -z, y, z, zero, -x, -y, x, zero], axis=-1).reshape(axis.shape[:-1] + (3, 3))
+    s, c = np.sin(angle)[..., None, None], np.cos(angle)[..., None, None]
+    return np.eye(3) + s * k + (1.0 - c) * (k @ k)
+
+
+def _angle(u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Angle between vectors, accurate near 0 and pi."""
+    return np.arctan2(np.linalg.norm(np.cross(u, v), axis=-1), np.sum(u * v, axis=-1))
+
+
+def rotation_between(u: np.ndarray, v: np.ndarray, fraction: np.ndarray | float = 1.0) -> np.ndarray:
+    """The shortest rotation turning direction u towards v, by `fraction` of the way."""
+    axis, _ = _unit(np.cross(u, v))
+    return axis_angle_matrix(axis, _angle(u, v) * fraction)
+
+
+def _apply_world(local: np.ndarray, parent_global: np.ndarray, world: np.ndarray) -> np.ndarray:
+    """New local rotation of a joint whose global rotation is pre-multiplied by `world`
+    while its parent's global rotation stays `parent_global`."""
+    return np.swapaxes(parent_global, -1, -2) @ world @ parent_global @ local
+
+
+# ------------------------------------------------------------------ contacts
+def contact_intervals(labels: np.ndarray, threshold: float = CONTACT_THRESHOLD,
+                      min_frames: int = MIN_CONTACT_FRAMES) -> list[tuple[int, int]]:
+    """(start, stop) frame ranges where labels (T,) exceed `threshold` for >= min_frames."""
+    on = np.concatenate([[0], (np.asarray(labels) > threshold).astype(np.int8), [0]])
+    edges = np.diff(on)
+    starts, stops = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
+    return [(int(s), int(e)) for s, e in zip(starts, stops) if e - s >= min_frames]
+
+
+def contact_mask(labels: np.ndarray, threshold: float = CONTACT_THRESHOLD,
+                 min_frames: int = MIN_CONTACT_FRAMES) -> np.ndarray:
+    """(T,) bool: frames inside a contact interval."""
+    mask = np.zeros(len(labels), dtype=bool)
+    for start, stop in contact_intervals(labels, threshold, min_frames):
+        mask[start:stop] = True
+    return mask
+
+
+def drop_slides(inside: np.ndarray, positions: np.ndarray, up_axis: int, limit: float) -> np.ndarray:
+    """`inside` (T,) without the runs over which the joint's horizontal positions (T, 3)
+    spread further than `limit`: a label on a swinging limb, not a planted one."""
+    out = inside.copy()
+    horizontal = [a for a in range(3) if a != up_axis]
+    for start, stop in contact_intervals(inside, min_frames=1):
+        if np.ptp(positions[start:stop][:, horizontal], axis=0).max() > limit:
+            out[start:stop] = False
+    return out
+
+
+def _fade(distance: np.ndarray, blend: int) -> np.ndarray:
+    """1 at distance 0, cosine down to 0 at blend + 1 frames."""
+    x = np.clip(distance / (blend + 1.0), 0.0, 1.0)
+    return 0.5 * (1.0 + np.cos(np.pi * x))
+
+
+def contact_offsets(positions: np.ndarray, inside: np.ndarray, up_axis: int = 1,
+                    blend: int = BLEND_FRAMES) -> tuple[np.ndarray, np.ndarray]:
+    """Horizontal IK offsets of one joint: `anchor` (T, 3) and `weight` (T,) with the
+    applied offset = weight * anchor. Inside an interval the anchor takes the joint to
+    the interval's mean horizontal position (weight 1); around it the boundary offsets
+    fade out and in."""
+    frames = len(positions)
+    index = np.arange(frames)
+    runs = np.cumsum(np.diff(np.concatenate([[False], inside]).astype(np.int8)) == 1) * inside  # 1.. per run, 0 outside
+    counts = np.bincount(runs, minlength=runs.max() + 1).astype(float)
+    means = np.stack([np.bincount(runs, positions[:, k], minlength=len(counts)) for k in range(3)], axis=1)
+    means /= np.maximum(counts, 1.0)[:, None]
+    offset = np.where(inside[:, None], means[runs] - positions, 0.0)
+    offset[:, up_axis] = 0.0
+    previous = np.maximum.accumulate(np.where(inside, index, -1))
+    following = np.minimum.accumulate(np.where(inside, index, frames)[::-1])[::-1]
+    w_prev = np.where(previous >= 0, _fade(index - previous, blend), 0.0)
+    w_next = np.where(following < frames, _fade(following - index, blend), 0.0)
+    total = w_prev + w_next
+    mixed = w_prev[:, None] * offset[np.maximum(previous, 0)] + w_next[:, None] * offset[np.minimum(following, frames - 1)]
+    anchor = np.where(total[:, None] > 0, mixed / np.maximum(total, _EPS)[:, None], 0.0)
+    return anchor, np.minimum(total, 1.0)
+
+
+def _cyclic_offsets(positions: np.ndarray, inside: np.ndarray, shift: np.ndarray, up_axis: int,
+                    blend: int) -> tuple[np.ndarray, np.ndarray]:
+    """contact_offsets on a loop: the cycle tiled three times (moved by `shift` per cycle)
+    so that intervals and fades wrap across the seam; the middle copy is returned."""
+    frames = len(positions)
+    tiled = np.concatenate([positions - shift, positions, positions + shift])
+    anchor, weight = contact_offsets(tiled, np.tile(inside, 3), up_axis, blend)
+    return anchor[frames : 2 * frames], weight[frames : 2 * frames]
+
+
+# ------------------------------------------------------------------ legs
+@dataclass(frozen=True)
+class Leg:
+    effector: int  # the joint the two-bone solve moves (keeping its world orientation)
+    hip: int | None  # None: one-bone solve (the knee aims the effector)
+    knee: int
+    contacts: tuple[int, ...]  # positions in codec.contact_joints of this leg's contact joints, top first
+    pivots: tuple[int | None, ...]  # per contact joint below the effector: the joint aiming it (None: not aimed)
+    keep_orientation: bool = True  # the effector can rotate (three rotation channels)
+
+
+def _descendants(parents: np.ndarray, joint: int) -> set[int]:
+    out = {joint}
+    for j in range(joint + 1, len(parents)):
+        if parents[j] in out:
+            out.add(j)
+    return out
+
+
+def _ancestors(parents: np.ndarray, joint: int) -> list[int]:
+    chain, j = [], int(parents[joint])
+    while j >= 0:
+        chain.append(j)
+        j = int(parents[j])
+    return chain
+
+
+def _pivot(animation: Animation, positions: np.ndarray, joint: int, movable: set[int]) -> int | None:
+    """The nearest ancestor that can rotate (three rotation channels, allowed) and is
+    not at the joint's own position."""
+    size = np.ptp(positions[0], axis=0).max() + _EPS
+    for j in _ancestors(animation.skeleton.parents, joint):
+        if j not in movable:
+            return None
+        if len(animation.skeleton.rotation_order(j)) == 3:
+            if np.median(np.linalg.norm(positions[:, joint] - positions[:, j], axis=-1)) > 1e-4 * size:
+                return j
+    return None
+
+
+def _bone(positions: np.ndarray, a: int, b: int) -> float:
+    return float(np.median(np.linalg.norm(positions[:, a] - positions[:, b], axis=-1)))
+
+
+def find_legs(animation: Animation, codec, positions: np.ndarray) -> list[Leg]:
+    """Group the contact joints into legs (chains) and choose each leg's IK joints."""
+    skeleton, parents = animation.skeleton, animation.skeleton.parents
+    contacts = list(codec.contact_joints)
+    frozen = set(codec.fixed_joints) | ({codec.trajectory_joint} if codec.trajectory_joint is not None else set())
+    tops = [c for c in contacts if not set(_ancestors(parents, c)) & set(contacts)]
+    legs = []
+    for top in tops:
+        members = [k for k, c in enumerate(contacts) if c == top or top in _ancestors(parents, c)]
+        others = set(contacts) - {contacts[k] for k in members}
+
+        def allowed(j: int) -> bool:  # rotating j moves no other leg, no root, nothing frozen
+            below = _descendants(parents, j)
+            return parents[j] >= 0 and j not in frozen and not below & (others | frozen)
+
+        movable = {j for j in range(skeleton.num_joints) if allowed(j)}
+        effector = top
+        knee = _pivot(animation, positions, effector, movable)
+        hip = None if knee is None else _pivot(animation, positions, knee, movable)
+        # A short end bone (a toe) under a long one: solve the ankle, the toe follows rigidly.
+        if (hip is not None and len(skeleton.rotation_order(knee)) == 3
+                and _bone(positions, knee, effector) < SHORT_BONE * _bone(positions, hip, knee)):
+            higher = _pivot(animation, positions, hip, movable)
+            if higher is not None:
+                effector, knee, hip = knee, hip, higher
+        if knee is None:
+            continue
+        below = _descendants(parents, effector)
+        ordered = tuple(sorted(members, key=lambda k: len(_ancestors(parents, contacts[k]))))
+        pivots = tuple(
+            p if (p := _pivot(animation, positions, contacts[k], movable)) is not None and p in below else None
+            for k in ordered if contacts[k] != effector
+        )
+        legs.append(Leg(effector, hip, knee, ordered, pivots, len(skeleton.rotation_order(effector)) == 3))
+    return legs
+
+
+# ------------------------------------------------------------------ IK
+def _hinge_axes(a: np.ndarray, b: np.ndarray, c: np.ndarray, hip_global: np.ndarray) -> np.ndarray:
+    """(T, 3) knee hinge axes (normal of the hip-knee-end plane). Frames with a straight
+    leg borrow the nearest bent frame's axis, carried in the hip's frame."""
+    axis, norm = _unit(np.cross(c - a, b - a))
+    bent = norm > 1e-6 * np.linalg.norm(c - a, axis=-1) * np.linalg.norm(b - a, axis=-1) + _EPS
+    if bent.all():
+        return axis
+    if not bent.any():
+        fallback = np.eye(3)[np.argmin(np.abs(_unit(c - a)[0]), axis=-1)]
+        return _unit(np.cross(c - a, fallback))[0]
+    local = np.einsum("tba,tb->ta", hip_global, axis)  # G^T axis
+    index = np.arange(len(a))
+    before = np.maximum.accumulate(np.where(bent, index, -1))
+    after = np.minimum.accumulate(np.where(bent, index, len(a))[::-1])[::-1]
+    nearest = np.where(before < 0, after, np.where(after >= len(a), before,
+                                                   np.where(index - before <= after - index, before, after)))
+    return np.where(bent[:, None], axis, np.einsum("tab,tb->ta", hip_global, local[nearest]))
+
+
+def two_bone_ik(a: np.ndarray, b: np.ndarray, c: np.ndarray, target: np.ndarray,
+                hinge: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """World rotations (T, 3, 3) of the hip (about a) and the knee (about b) that bring the
+    end c to `target`, clamped to the chain's reach; the knee bends about `hinge`.
+    Apply the knee's first, then the hip's: c' = a + H (b - a + K (c - b))."""
+    upper, lower = np.linalg.norm(b - a, axis=-1), np.linalg.norm(c - b, axis=-1)
+    reach = np.maximum(upper + lower, _EPS)
+    wanted = np.clip(np.linalg.norm(target - a, axis=-1), np.abs(upper - lower) + 1e-6 * reach, reach * (1 - 1e-6))
+    den_hip = np.maximum(2 * upper * wanted, _EPS)
+    den_knee = np.maximum(2 * upper * lower, _EPS)
+    hip_now, knee_now = _angle(c - a, b - a), _angle(a - b, c - b)
+    hip_want = np.arccos(np.clip((upper**2 + wanted**2 - lower**2) / den_hip, -1, 1))
+    knee_want = np.arccos(np.clip((upper**2 + lower**2 - wanted**2) / den_knee, -1, 1))
+    # The knee opens about the hinge; the hip turns the same plane back so the end keeps its
+    # direction from the hip, then swings that direction onto the target.
+    knee = axis_angle_matrix(hinge, knee_want - knee_now)
+    bend_back = axis_angle_matrix(hinge, hip_want - hip_now)
+    swing = rotation_between(c - a, target - a)
+    return swing @ bend_back, knee
+
+
+def _on_sphere(center: np.ndarray, current: np.ndarray, anchor: np.ndarray, up: int) -> np.ndarray:
+    """The point at current's distance from `center` whose horizontal position is the
+    anchor's (or as near as that distance allows), on current's side of center's height:
+    where a bone from `center` must point for its end to stand over the anchor."""
+    radius = np.linalg.norm(current - center, axis=-1)
+    flat = anchor - center
+    flat[..., up] = 0.0
+    direction, distance = _unit(flat)
+    distance = np.minimum(distance, radius)
+    side = np.where(current[..., up] >= center[..., up], 1.0, -1.0)
+    point = center + direction * distance[..., None]
+    point[..., up] += side * np.sqrt(np.maximum(radius**2 - distance**2, 0.0))
+    return point
+
+
+@dataclass(frozen=True)
+class _Targets:
+    positions: np.ndarray  # (T, J, 3) joint positions before cleanup
+    anchors: np.ndarray  # (T, C, 3) horizontal offsets to each contact joint's target
+    weights: np.ndarray  # (T, C) how much of the offset applies
+    up: int
+
+
+def _solve_leg(local: np.ndarray, translations: np.ndarray, parents: np.ndarray, leg: Leg, contacts: list[int],
+               targets: _Targets, free: np.ndarray | float = 1.0) -> np.ndarray:
+    """Updated local rotations (T, J, 3, 3) for one leg; `free` (T,) scales the offsets
+    (0 where an application keeps the leg's pose)."""
+    anchors, weights = targets.anchors, targets.weights * np.reshape(free, (-1, 1))
+    glob, pos = forward_kinematics(local, translations, parents)
+    top = leg.contacts[0] if contacts[leg.contacts[0]] == leg.effector else None
+    lower = [k for k in leg.contacts if k != top]
+    # The effector moves by its own offset, and otherwise by what its lower contacts ask.
+    low_w = weights[:, lower].sum(axis=1) if lower else np.zeros(len(local))
+    low_offset = np.einsum("tk,tkd->td", weights[:, lower], anchors[:, lower]) / np.maximum(low_w, 1.0)[:, None] \
+        if lower else np.zeros((len(local), 3))
+    own_w = weights[:, top] if top is not None else np.zeros(len(local))
+    own = anchors[:, top] * own_w[:, None] if top is not None else 0.0
+    shift = own + (1.0 - own_w)[:, None] * low_offset
+    active = (own_w > 0) | (low_w > 0)
+    if not active.any():
+        return local
+    e, k = leg.effector, leg.knee
+    out = local.copy()
+    target = pos[:, e] + shift
+    if leg.hip is not None:
+        h = leg.hip
+        hinge = _hinge_axes(pos[:, h], pos[:, k], pos[:, e], glob[:, h])
+        hip_world, knee_world = two_bone_ik(pos[:, h], pos[:, k], pos[:, e], target, hinge)
+        out[:, h] = _apply_world(local[:, h], glob[:, parents[h]], hip_world)
+        if k != h:
+            out[:, k] = _apply_world(local[:, k], glob[:, parents[k]], knee_world)
+        total = hip_world @ knee_world
+    else:
+        total = rotation_between(pos[:, e] - pos[:, k], target - pos[:, k])
+        out[:, k] = _apply_world(local[:, k], glob[:, parents[k]], total)
+    if leg.keep_orientation:  # keep the effector's world orientation: the joints below translate rigidly
+        out[:, e] = _apply_world(local[:, e], glob[:, parents[e]], np.swapaxes(total, -1, -2))
+    for m, pivot in zip([m for m in leg.contacts if m != top], leg.pivots):
+        if pivot is None:
+            continue
+        glob, pos = forward_kinematics(out, translations, parents)
+        joint = contacts[m]
+        goal = _on_sphere(pos[:, pivot], pos[:, joint], targets.positions[:, joint] + anchors[:, m], targets.up)
+        aim = rotation_between(pos[:, joint] - pos[:, pivot], goal - pos[:, pivot], weights[:, m])
+        out[:, pivot] = _apply_world(out[:, pivot], glob[:, parents[pivot]], aim)
+    return np.where(active[:, None, None, None], out, local)
+
+
+def cleanup_contacts(animation: Animation, codec, features: np.ndarray,
+                     loop_displacement: np.ndarray | None = None, keep: np.ndarray | None = None) -> Animation:
+    """The animation with its contact joints pinned where `features`' contact labels
+    (T, F, the sampled features the animation was decoded from) say they touch the
+    floor. `loop_displacement`: for a loop, the root's motion per cycle as
+    `sampler.cycle_displacement` gives it (metres along `codec.horizontal_axes`),
+    so that contacts across the seam are one interval and the loop stays seamless.
+    `keep` (T, F) in [0, 1]: an application's kept features (`Guide.keep`); a leg whose
+    rotations are kept is left as the application made it, by the kept share."""
+    channels = codec.layout.indices(("contact",))
+    contacts = list(codec.contact_joints)
+    if not contacts or not len(channels) or animation.frames < MIN_CONTACT_FRAMES:
+        return animation
+    labels = np.asarray(features, dtype=np.float64)[: animation.frames, channels]
+    inside = np.stack([contact_mask(labels[:, k]) for k in range(len(contacts))], axis=1)
+    if not inside.any():
+        return animation
+    up = int(getattr(codec, "up_axis", 1))
+    parents = animation.skeleton.parents
+    local = quat_to_matrix(animation.rotations)
+    _, positions = forward_kinematics(local, animation.translations, parents)
+    limit = MAX_SLIDE * codec.size / codec.scale
+    inside = np.stack([drop_slides(inside[:, k], positions[:, j], up, limit) for k, j in enumerate(contacts)], axis=1)
+    shift = _cycle_shift(codec, local, animation.translations, loop_displacement)
+    anchors, weights = np.zeros((animation.frames, len(contacts), 3)), np.zeros((animation.frames, len(contacts)))
+    for k, joint in enumerate(contacts):
+        if inside[:, k].any():
+            if shift is None:
+                anchors[:, k], weights[:, k] = contact_offsets(positions[:, joint], inside[:, k], up)
+            else:
+                anchors[:, k], weights[:, k] = _cyclic_offsets(positions[:, joint], inside[:, k], shift, up, BLEND_FRAMES)
+    legs = find_legs(animation, codec, positions)
+    targets = _Targets(positions, anchors, weights, up)
+    for leg in legs:
+        local = _solve_leg(local, animation.translations, parents, leg, contacts, targets, _free(codec, leg, keep))
+    changed = sorted({j for leg in legs for j in (leg.hip, leg.knee, leg.effector, *leg.pivots) if j is not None})
+    old = animation.rotations[:, changed]
+    new = matrix_to_quat(local[:, changed])
+    finite = np.isfinite(new).all(axis=(-1, -2))  # never NaN: a frame that failed keeps its pose
+    moved = np.any(local[:, changed] != quat_to_matrix(old), axis=(-1, -2)) & finite[:, None]
+    rotations = animation.rotations.copy()
+    rotations[:, changed] = np.where(moved[..., None], new, old)
+    return Animation(animation.skeleton, rotations, animation.translations, animation.fps)
+
+
+def _free(codec, leg: Leg, keep: np.ndarray | None) -> np.ndarray | float:
+    """(T,) 1 - the largest kept share of the leg's solved rotations (1 without a guide)."""
+    if keep is None:
+        return 1.0
+    names = {codec.skeleton.names[j] for j in (leg.hip, leg.knee, leg.effector, *leg.pivots) if j is not None}
+    channels = codec.layout.indices(("rotation",), names)
+    if not len(channels):
+        return 1.0
+    return 1.0 - np.clip(np.asarray(keep, dtype=np.float64)[:, channels].max(axis=1), 0.0, 1.0)
+
+
+def _cycle_shift(codec, local: np.ndarray, translations: np.ndarray, displacement) -> np.ndarray | None:
+    """World displacement (3,) in file units of a loop's cycle, or None for a plain clip."""
+    if displacement is None or codec.trajectory_joint is None:
+        return None
+    step = np.zeros(3)
+    h1, h2 = codec.horizontal_axes
+    step[h1], step[h2] = np.asarray(displacement, dtype=np.float64)[:2] / codec.scale
+    parent = codec.skeleton.parents[codec.trajectory_joint]
+    if parent < 0:
+        return step
+    glob, _ = forward_kinematics(local[:1], translations[:1], codec.skeleton.parents)
+    return glob[0, parent] @ step

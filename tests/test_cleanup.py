@@ -1,0 +1,143 @@
+"""Foot-contact cleanup (runtime/cleanup.py): planted feet stop sliding, nothing else moves."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+
+import numpy as np
+import pytest
+
+from sinmdm.eval.plausibility import plausibility
+from sinmdm.runtime import GenerationRequest, generate, load_model, read_bvh
+from sinmdm.runtime.animation import Animation, animation_from_bvh, global_positions
+from sinmdm.runtime.cleanup import cleanup_contacts, contact_intervals, contact_offsets
+from sinmdm.runtime.features import build_codec
+
+from .conftest import DEMO_CLIP, real_clip, run_cli
+from .layouts import z_up
+
+
+@pytest.fixture(scope="module")
+def demo():
+    model = load_model()
+    plain = generate(model, GenerationRequest(frames=240, count=4, seed=3, cleanup=False))
+    cleaned = generate(model, GenerationRequest(frames=240, count=4, seed=3))
+    return model, plain, cleaned
+
+
+def test_intervals_and_fades():
+    labels = np.array([0, 1, 1, 1, 0, 1, 0, 0, 1, 1])
+    assert contact_intervals(labels) == [(1, 4), (8, 10)]  # the single frame is noise
+    positions = np.zeros((30, 3))
+    positions[:, 0] = np.arange(30) * 0.1  # a foot sliding along x
+    inside = np.zeros(30, dtype=bool)
+    inside[10:20] = True
+    anchor, weight = contact_offsets(positions, inside, up_axis=1, blend=4)
+    pinned = positions + weight[:, None] * anchor
+    assert np.allclose(pinned[10:20, 0], positions[10:20, 0].mean())  # planted at the run's mean
+    assert np.all(anchor[:, 1] == 0)  # height is never touched
+    assert weight[10:20].min() == 1 and weight[:5].max() == 0 and weight[25:].max() == 0
+    assert np.all(np.diff(weight[5:11]) >= 0) and np.all(np.diff(weight[19:25]) <= 0)  # ramps, no pop
+
+
+def test_cleanup_removes_sliding_on_the_demo_model(demo):
+    """On sampled motion the planted feet slide several times the clip's own speed; after the
+    cleanup they slide no more than the clip (plus the verdict's slack)."""
+    model, plain, cleaned = demo
+    reference = read_bvh(DEMO_CLIP)
+    before = plausibility(reference, plain.clips)["aggregate"]
+    after = plausibility(reference, cleaned.clips)["aggregate"]
+    clip = after["clip_foot_skating_cm_s"]
+    assert before["foot_skating_cm_s"] > 4 * clip
+    assert after["foot_skating_cm_s"] < 1.5 * clip
+    assert after["foot_skating_cm_s"] < before["foot_skating_cm_s"] / 4
+    assert after["root_step_max_ratio"] == pytest.approx(before["root_step_max_ratio"])  # the root is untouched
+
+
+def test_only_leg_rotations_change_and_bones_keep_their_length(demo):
+    model, plain, cleaned = demo
+    codec = model.codec
+    for a, b in zip(plain.clips, cleaned.clips):
+        before, after = animation_from_bvh(a), animation_from_bvh(b)
+        np.testing.assert_array_equal(before.translations, after.translations)
+        p, q = global_positions(before), global_positions(after)
+        parents = before.skeleton.parents
+        child = np.arange(1, len(parents))
+        np.testing.assert_allclose(np.linalg.norm(q[:, child] - q[:, parents[child]], axis=-1),
+                                   np.linalg.norm(p[:, child] - p[:, parents[child]], axis=-1), atol=1e-3)
+        moved = np.abs(q - p).max(axis=(0, 2)) > 1e-6
+        legs = set()  # the joints between the trajectory joint and a contact joint, and all below them
+        for j in codec.contact_joints:
+            legs |= set(_chain(parents, j)) - set(_chain(parents, codec.trajectory_joint))
+        legs = {j for j in range(len(parents)) if set(_chain(parents, j)) & legs}
+        assert set(np.flatnonzero(moved)) <= legs and moved.any()
+
+
+def _chain(parents, joint):
+    out = []
+    while joint >= 0:
+        out.append(joint)
+        joint = parents[joint]
+    return out
+
+
+def test_without_contacts_nothing_changes(demo):
+    model, plain, _ = demo
+    features = plain.features[0].copy()
+    features[:, model.codec.layout.indices(("contact",))] = 0.0
+    animation = model.codec.decode(features)
+    out = cleanup_contacts(animation, model.codec, features)
+    np.testing.assert_array_equal(out.rotations, animation.rotations)
+
+
+@pytest.mark.parametrize("name", ["Joe_Walk-In-Circle.bvh", "Xia_normal.bvh"])
+def test_cleanup_is_the_same_on_a_z_up_export(name):
+    """A slid copy of a real clip is pinned back the same way whether the file is Y-up or Z-up:
+    the cleanup keeps the up axis' height and only moves the feet on the floor plane."""
+    results = []
+    for bvh in (read_bvh(real_clip(name)), z_up(read_bvh(real_clip(name)))):
+        codec = build_codec(bvh)
+        features = codec.encode(bvh)
+        animation = codec.decode(features)
+        out = cleanup_contacts(animation, codec, features)
+        p, q = global_positions(animation), global_positions(out)
+        feet = list(codec.contact_joints)
+        results.append((codec.up_axis, q[:, feet] - p[:, feet]))
+    (up_y, moved_y), (up_z, moved_z) = results
+    assert (up_y, up_z) == (1, 2)
+    rotated = moved_y @ np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]]).T
+    np.testing.assert_allclose(moved_z, rotated, atol=1e-3 * np.abs(moved_y).max() + 1e-6)
+
+
+def test_cleanup_never_makes_a_real_clip_slide_more():
+    """The training clip itself, with its own contact labels: pinning keeps it as good as it was."""
+    bvh = read_bvh(real_clip("Joe_Walk-In-Circle.bvh"))
+    codec = build_codec(bvh)
+    features = codec.encode(bvh)
+    animation = codec.decode(features)
+    out = cleanup_contacts(animation, codec, features)
+    before = plausibility(bvh, [codec.decode_bvh(features)])["aggregate"]["foot_skating_cm_s"]
+    clip = Animation(out.skeleton, out.rotations, out.translations, out.fps)
+    from sinmdm.runtime.animation import animation_to_bvh
+
+    after = plausibility(bvh, [animation_to_bvh(clip)])["aggregate"]["foot_skating_cm_s"]
+    assert after <= before + 0.1
+
+
+def _digest(path) -> str:
+    return hashlib.sha256(open(path, "rb").read()).hexdigest()
+
+
+def test_cli_cleanup_flag_and_determinism(tmp_path, no_torch_env):
+    runs = {}
+    for tag, extra in (("a", []), ("b", []), ("off", ["--no-cleanup"])):
+        result = run_cli("sinmdm-run", "sample", "--seconds", "3", "--steps", "8", "--seed", "2", "--json",
+                         "--out", str(tmp_path / tag), *extra, env=no_torch_env, check=True)
+        runs[tag] = json.loads(result.stdout)
+    assert runs["a"]["cleanup"] is True and runs["off"]["cleanup"] is False
+    assert _digest(runs["a"]["files"][0]) == _digest(runs["b"]["files"][0])
+    assert _digest(runs["a"]["files"][0]) != _digest(runs["off"]["files"][0])
+    result = run_cli("sinmdm-run", "inbetween", "--ref", str(DEMO_CLIP), "--steps", "4", "--no-cleanup", "--json",
+                     "--out", str(tmp_path / "inb"), env=no_torch_env, check=True)
+    assert json.loads(result.stdout)["cleanup"] is False
