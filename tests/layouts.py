@@ -29,7 +29,7 @@ def _with_new_root(bvh: BVH, name: str, channels: tuple[str, ...], every_joint: 
         end_sites=tuple((p + 1, o) for p, o in old.end_sites),
     )
     frames = animation.frames
-    identity = np.tile([1.0, 0.0, 0.0, 0.0], (frames, 1, 1))
+    identity = np.broadcast_to(np.eye(3), (frames, 1, 3, 3))
     rotations = np.concatenate([identity, animation.rotations], axis=1)
     translations = np.concatenate([np.zeros((frames, 1, 3)), animation.translations], axis=1)
     return animation_to_bvh(Animation(skeleton, rotations, translations, animation.fps))
@@ -58,9 +58,9 @@ def z_up(bvh: BVH) -> BVH:
         channels=old.channels,
         end_sites=tuple((p, None if o is None else Y_TO_Z @ o) for p, o in old.end_sites),
     )
-    matrices = Y_TO_Z @ quat_to_matrix(animation.rotations) @ Y_TO_Z.T
+    matrices = Y_TO_Z @ animation.rotations @ Y_TO_Z.T
     translations = animation.translations @ Y_TO_Z.T
-    return animation_to_bvh(Animation(skeleton, matrix_to_quat(matrices), translations, animation.fps))
+    return animation_to_bvh(Animation(skeleton, matrices, translations, animation.fps))
 
 
 def scaled(bvh: BVH, factor: float) -> BVH:

@@ -33,7 +33,7 @@ from ..runtime.bvh import BVH, Skeleton, read_bvh
 from ..runtime.contacts import contact_labels
 from ..runtime.errors import SinMDMError
 from ..runtime.features import build_codec, resample_animation, skeleton_size, unit_scale
-from ..runtime.rotations import matrix_to_6d, quat_to_matrix
+from ..runtime.rotations import matrix_to_6d
 from . import metrics
 
 __all__ = [
@@ -204,7 +204,7 @@ def eval_features(bvh: BVH, protocol: EvalProtocol, source_fps: float | None = N
     contacts = resolve_joints(bvh.skeleton, protocol.contact_joints, protocol.match, where)
     animation = _animation_at(bvh, protocol, source_fps)
     frames = animation.frames
-    rotations = matrix_to_6d(quat_to_matrix(animation.rotations[:, joints])).reshape(frames, -1)
+    rotations = matrix_to_6d(animation.rotations[:, joints]).reshape(frames, -1)
     if not contacts:
         return rotations
     metres = global_positions(animation)[:, contacts] * _file_scale(bvh.skeleton, protocol)

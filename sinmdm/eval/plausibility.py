@@ -18,7 +18,6 @@ from ..runtime.bvh import BVH
 from ..runtime.contacts import contact_labels
 from ..runtime.features import MotionCodec, build_codec, resample_animation
 from ..runtime.kinematics import forward_kinematics
-from ..runtime.rotations import quat_to_matrix
 
 FPS = 30.0
 MOVING_SPEED = 0.1  # m/s: below this the root is standing, its direction means nothing
@@ -43,7 +42,7 @@ class Track:
 
 def track(bvh: BVH, names: list[str], scale: float) -> Track:
     animation = resample_animation(animation_from_bvh(bvh), FPS)
-    rotations, positions = forward_kinematics(quat_to_matrix(animation.rotations), animation.translations,
+    rotations, positions = forward_kinematics(animation.rotations, animation.translations,
                                               animation.skeleton.parents)
     index = [bvh.skeleton.index(n) for n in names]
     return Track(positions[:, index] * scale, rotations[:, index[0]])

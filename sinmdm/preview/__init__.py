@@ -123,7 +123,6 @@ def stick_figure(
     from ..runtime.features import unit_scale
     from ..runtime.kinematics import end_site_positions, forward_kinematics
     from ..runtime.rig import analyse_rig
-    from ..runtime.rotations import quat_to_matrix
 
     if bvh.frames == 0:
         raise SinMDMError(f"{bvh.path or 'the clip'} has no frames to show")
@@ -134,9 +133,7 @@ def stick_figure(
     scale = unit_scale(skeleton, units)
     animation = animation_from_bvh(bvh)
     rig = analyse_rig(Animation(skeleton, animation.rotations, animation.translations, rate), scale, root, up)
-    rotations, positions = forward_kinematics(
-        quat_to_matrix(animation.rotations), animation.translations, skeleton.parents
-    )
+    rotations, positions = forward_kinematics(animation.rotations, animation.translations, skeleton.parents)
     ends = end_site_positions(rotations, positions, skeleton.end_sites)
     parents = np.concatenate([skeleton.parents, [p for p, _ in skeleton.end_sites]]).astype(np.int64)
     names = list(skeleton.names) + [f"{skeleton.names[p]}_end" for p, _ in skeleton.end_sites]

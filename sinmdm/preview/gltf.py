@@ -141,7 +141,7 @@ def bvh_to_glb(
         channels.append(gltf_module.AnimationChannel(sampler=len(samplers) - 1, target=target))
 
     # Consecutive keys on the same hemisphere, so interpolation takes the short way.
-    rotations = quat_fix_sign(quat_normalize(animation.rotations), axis=0)
+    rotations = quat_fix_sign(quat_normalize(matrix_to_quat(animation.rotations)), axis=0)
     for j in range(joint_count):
         add_channel(j, "rotation", rotations[:, j][:, [1, 2, 3, 0]], "VEC4")
         if skeleton.position_channels(j):

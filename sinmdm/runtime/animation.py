@@ -1,7 +1,8 @@
 """BVH channel values <-> per-joint local rotations and translations.
 
-An `Animation` holds, for every frame and joint, the local rotation (quaternion
-w, x, y, z) and the local translation (the BVH offset, with any position
+An `Animation` holds, for every frame and joint, the local rotation (a 3x3
+matrix; quaternions appear only where slerp needs them, in resampling and glTF)
+and the local translation (the BVH offset, with any position
 channels replacing the matching axes), in the file's units.
 """
 
@@ -16,8 +17,6 @@ from .kinematics import forward_kinematics
 from .rotations import (
     euler_to_matrix,
     matrix_to_euler,
-    matrix_to_quat,
-    quat_to_matrix,
     unwrap_euler,
 )
 
@@ -27,7 +26,7 @@ AXES = "XYZ"
 @dataclass(frozen=True)
 class Animation:
     skeleton: Skeleton
-    rotations: np.ndarray  # (T, J, 4) local quaternions
+    rotations: np.ndarray  # (T, J, 3, 3) local rotation matrices
     translations: np.ndarray  # (T, J, 3) local translations, file units
     fps: float
 
@@ -90,13 +89,13 @@ def animation_from_bvh(bvh: BVH) -> Animation:
             matrices[:, j] = m
         for column, axis in _position_columns(skeleton, j):
             translations[:, j, axis] = values[:, column]
-    return Animation(skeleton, matrix_to_quat(matrices), translations, nominal_fps(bvh.frame_time))
+    return Animation(skeleton, matrices, translations, nominal_fps(bvh.frame_time))
 
 
 def animation_to_bvh(animation: Animation) -> BVH:
     """Channel values on the animation's skeleton, Euler curves unwrapped."""
     skeleton = animation.skeleton
-    matrices = quat_to_matrix(animation.rotations)
+    matrices = animation.rotations
     values = np.zeros((animation.frames, skeleton.num_channels))
     by_order: dict[str, list[int]] = {}
     for j in range(skeleton.num_joints):
@@ -116,9 +115,7 @@ def animation_to_bvh(animation: Animation) -> BVH:
 
 def global_positions(animation: Animation) -> np.ndarray:
     """(T, J, 3) world positions of every joint, file units."""
-    _, positions = forward_kinematics(
-        quat_to_matrix(animation.rotations), animation.translations, animation.skeleton.parents
-    )
+    _, positions = forward_kinematics(animation.rotations, animation.translations, animation.skeleton.parents)
     return positions
 
 

@@ -35,7 +35,6 @@ import numpy as np
 
 from .animation import Animation
 from .kinematics import forward_kinematics
-from .rotations import matrix_to_quat, quat_to_matrix
 
 CONTACT_THRESHOLD = 0.5  # a label above this is "in contact"
 MIN_CONTACT_FRAMES = 2  # shorter runs are noise
@@ -357,7 +356,7 @@ def cleanup_contacts(animation: Animation, codec, features: np.ndarray,
         return animation
     up = int(getattr(codec, "up_axis", 1))
     parents = animation.skeleton.parents
-    local = quat_to_matrix(animation.rotations)
+    local = animation.rotations
     _, positions = forward_kinematics(local, animation.translations, parents)
     limit = MAX_SLIDE * codec.size / codec.scale
     inside = np.stack([drop_slides(inside[:, k], positions[:, j], up, limit) for k, j in enumerate(contacts)], axis=1)
@@ -373,13 +372,8 @@ def cleanup_contacts(animation: Animation, codec, features: np.ndarray,
     targets = _Targets(positions, anchors, weights, up)
     for leg in legs:
         local = _solve_leg(local, animation.translations, parents, leg, contacts, targets, _free(codec, leg, keep))
-    changed = sorted({j for leg in legs for j in (leg.hip, leg.knee, leg.effector, *leg.pivots) if j is not None})
-    old = animation.rotations[:, changed]
-    new = matrix_to_quat(local[:, changed])
-    finite = np.isfinite(new).all(axis=(-1, -2))  # never NaN: a frame that failed keeps its pose
-    moved = np.any(local[:, changed] != quat_to_matrix(old), axis=(-1, -2)) & finite[:, None]
-    rotations = animation.rotations.copy()
-    rotations[:, changed] = np.where(moved[..., None], new, old)
+    finite = np.isfinite(local).all(axis=(-1, -2))  # never NaN: a joint whose solve failed keeps its pose
+    rotations = np.where(finite[..., None, None], local, animation.rotations)
     return Animation(animation.skeleton, rotations, animation.translations, animation.fps)
 
 

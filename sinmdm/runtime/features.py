@@ -26,7 +26,7 @@ from .animation import Animation, animation_from_bvh, animation_to_bvh, global_p
 from .bvh import BVH, Skeleton
 from .contacts import contact_labels, default_contact_speed, detect_contact_joints
 from .errors import SinMDMError
-from .resample import resample_linear, resample_quaternions
+from .resample import resample_linear, resample_rotations
 from .rig import AXIS_NAMES, analyse_rig, skeleton_extent as skeleton_size
 from .rotations import matrix_to_6d, matrix_to_quat, quat_to_matrix, sixd_to_matrix
 
@@ -129,7 +129,7 @@ def resample_animation(animation: Animation, fps: float, method: str = "slerp") 
         return Animation(animation.skeleton, animation.rotations[::k], animation.translations[::k], fps)
     return Animation(
         animation.skeleton,
-        resample_quaternions(animation.rotations, animation.fps, fps),
+        resample_rotations(animation.rotations, animation.fps, fps),
         resample_linear(animation.translations, animation.fps, fps),
         fps,
     )
@@ -163,7 +163,7 @@ class MotionCodec:
     up_axis: int = 1  # world axis index (1 = Y-up, 2 = Z-up)
     height_axis: int = 1  # the trajectory joint's parent-frame axis that points up
     fixed_joints: tuple[int, ...] = ()  # static joints above the trajectory joint
-    rest_rotations: np.ndarray | None = None  # (J, 4) used for rotations that are not features
+    rest_rotations: np.ndarray | None = None  # (J, 3, 3) used for rotations that are not features (quaternions on disk)
     layout: FeatureLayout = field(init=False, compare=False)
 
     def __post_init__(self) -> None:
@@ -229,7 +229,7 @@ class MotionCodec:
         """(T, F) float32 features at the codec's frame rate."""
         animation = self.animation(clip, source_fps)
         parts = []
-        matrices = quat_to_matrix(animation.rotations[:, self.rotation_joints])
+        matrices = animation.rotations[:, self.rotation_joints]
         parts.append(matrix_to_6d(matrices).reshape(animation.frames, -1))
         metres = animation.translations * self.scale
         parts.append(metres[:, list(self.translation_joints)].reshape(animation.frames, -1))
@@ -258,7 +258,7 @@ class MotionCodec:
         if features.ndim != 2 or features.shape[1] != self.width:
             raise SinMDMError(f"features have shape {features.shape}, expected (frames, {self.width})")
         frames, joints = features.shape[0], self.skeleton.num_joints
-        rest = np.eye(3) if self.rest_rotations is None else quat_to_matrix(self.rest_rotations)
+        rest = np.eye(3) if self.rest_rotations is None else self.rest_rotations
         matrices = np.broadcast_to(rest, (frames, joints, 3, 3)).copy()
         rot = self.layout.indices(("rotation",))
         matrices[:, self.rotation_joints] = sixd_to_matrix(features[:, rot].reshape(frames, -1, 6))
@@ -275,7 +275,7 @@ class MotionCodec:
             path = np.zeros((frames, 3))
             path[:, h1], path[:, self.height_axis], path[:, h2] = x, y, z
             translations[:, self.trajectory_joint] = path / self.scale
-        return Animation(self.skeleton, matrix_to_quat(matrices), translations, self.fps)
+        return Animation(self.skeleton, matrices, translations, self.fps)
 
     def decode_bvh(self, features: np.ndarray, start: np.ndarray | None = None) -> BVH:
         return animation_to_bvh(self.decode(features, start))
@@ -296,7 +296,7 @@ class MotionCodec:
             "up_axis": self.up_axis,
             "height_axis": self.height_axis,
             "fixed_joints": [names[j] for j in self.fixed_joints],
-            "rest_rotations": None if self.rest_rotations is None else np.asarray(self.rest_rotations).tolist(),
+            "rest_rotations": None if self.rest_rotations is None else matrix_to_quat(self.rest_rotations).tolist(),
             "layout": self.layout.to_dict(),
         }
 
@@ -317,7 +317,7 @@ class MotionCodec:
             up_axis=int(data.get("up_axis", 1)),
             height_axis=int(data.get("height_axis", 1)),
             fixed_joints=tuple(index[n] for n in data.get("fixed_joints", [])),
-            rest_rotations=None if data.get("rest_rotations") is None else np.asarray(data["rest_rotations"], dtype=np.float64),
+            rest_rotations=None if data.get("rest_rotations") is None else quat_to_matrix(np.asarray(data["rest_rotations"], dtype=np.float64)),
         )
         if "layout" in data and codec.layout.to_dict() != data["layout"]:
             raise SinMDMError("stored feature layout does not match the one this version derives")

@@ -2,7 +2,7 @@
 
 Output frame k sits at fractional source frame k * src_fps / dst_fps, and the
 output covers the same duration as the input (the last output frame is at or
-before the last input frame). Quaternions use (w, x, y, z) and are slerped;
+before the last input frame). Rotations are slerped (quaternions w, x, y, z);
 everything else is interpolated linearly. Integer ratios reproduce source
 frames exactly.
 """
@@ -13,7 +13,7 @@ import math
 
 import numpy as np
 
-from .rotations import quat_fix_sign, quat_normalize, quat_slerp
+from .rotations import matrix_to_quat, quat_fix_sign, quat_normalize, quat_slerp, quat_to_matrix
 
 
 def resample_count(frames: int, src_fps: float, dst_fps: float) -> int:
@@ -65,3 +65,11 @@ def resample_quaternions(q: np.ndarray, src_fps: float, dst_fps: float) -> np.nd
     lower, upper, weight = _neighbours(len(q), src_fps, dst_fps)
     weight = np.broadcast_to(weight.reshape((-1,) + (1,) * (q.ndim - 2)), (len(lower),) + q.shape[1:-1])
     return quat_fix_sign(quat_slerp(q[lower], q[upper], weight), axis=0)
+
+
+def resample_rotations(m: np.ndarray, src_fps: float, dst_fps: float) -> np.ndarray:
+    """Slerp (T, ..., 3, 3) rotation matrices (through quaternions, where slerp lives)."""
+    m = np.asarray(m, dtype=np.float64)
+    if src_fps == dst_fps:
+        return m.copy()
+    return quat_to_matrix(resample_quaternions(matrix_to_quat(m), src_fps, dst_fps))

@@ -23,7 +23,6 @@ from .bvh import Skeleton
 from .contacts import joint_speeds
 from .errors import SinMDMError
 from .kinematics import forward_kinematics
-from .rotations import quat_to_matrix
 
 AXIS_NAMES = "xyz"
 UP_CANDIDATES = (1, 2)  # Y-up (most tools) or Z-up (Blender, 3ds Max exports)
@@ -55,8 +54,8 @@ def static_joints(animation: Animation, size: float) -> np.ndarray:
     if animation.frames < 2:
         return np.ones(animation.skeleton.num_joints, dtype=bool)
     still = np.ptp(animation.translations, axis=0).max(axis=1) <= STATIC_POSITION * size
-    dots = np.abs(np.sum(animation.rotations * animation.rotations[:1], axis=-1))  # (T, J)
-    angles = 2 * np.arccos(np.clip(dots, 0.0, 1.0))
+    relative = np.swapaxes(animation.rotations[:1], -1, -2) @ animation.rotations  # (T, J, 3, 3)
+    angles = np.arccos(np.clip((np.trace(relative, axis1=-2, axis2=-1) - 1.0) / 2.0, -1.0, 1.0))
     return still & (angles.max(axis=0) <= STATIC_ANGLE)
 
 
@@ -115,7 +114,7 @@ def parent_height_axis(animation: Animation, joint: int | None, up_axis: int) ->
     position channels are written in)."""
     if joint is None or animation.skeleton.parents[joint] < 0:
         return up_axis
-    rotations, _ = forward_kinematics(quat_to_matrix(animation.rotations[0]), animation.translations[0],
+    rotations, _ = forward_kinematics(animation.rotations[0], animation.translations[0],
                                       animation.skeleton.parents)
     up_in_parent = rotations[animation.skeleton.parents[joint]].T[:, up_axis]
     return int(np.argmax(np.abs(up_in_parent)))
