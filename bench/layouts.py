@@ -6,7 +6,8 @@ metrics), beside the paper's coverage and diversity.
 
     python bench/layouts.py --work runs/layouts --results bench/results/layouts.json
 
-Each model is sampled twice, with the same seeds: `faithful` (the paper's sampler:
+Each model is sampled twice, with the same seeds (`--seeds 0 1000` adds a second
+set of seeds to every case, without retraining: the run-to-run spread): `faithful` (the paper's sampler:
 no edge margin, no foot cleanup) and `default` (what `sinmdm-run sample` does: an
 8-frame margin cut off each end, foot-contact cleanup), so every improvement is
 measured against the baseline it replaces.
@@ -28,7 +29,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from bench.quality import MOTIONS, eval_protocol, export_trained_window, run  # noqa: E402
+from bench.quality import MOTIONS, SAMPLER_VARIANTS, eval_protocol, export_trained_window, run  # noqa: E402
 from tests.layouts import LAYOUTS  # noqa: E402
 
 SHARED = ("Joe_Walk-In-Circle.bvh", "Joe_Baseball-Milling-Idle.bvh", "Crabnew_Crab-dance-long.bvh",
@@ -53,7 +54,7 @@ def derived_clip(name: str, layout: str | None, work: Path) -> Path:
     return path
 
 
-VARIANTS = {"faithful": {"margin": 0, "cleanup": False}, "default": {}}
+VARIANTS = SAMPLER_VARIANTS
 KEYS = ("coverage", "global_diversity", "local_diversity")
 
 
@@ -73,48 +74,56 @@ def main() -> None:
     parser.add_argument("--samples", type=int, default=8)
     parser.add_argument("--only", nargs="*", default=None, help="tags to run")
     parser.add_argument("--rescore", action="store_true", help="score the samples already written again")
+    parser.add_argument("--seeds", nargs="+", type=int, default=[0],
+                        help="first seed of each set of samples; a second set gives the run-to-run spread")
     args = parser.parse_args()
 
-    from sinmdm.runtime import GenerationRequest, generate, load_model, read_bvh, write_outputs
+    from sinmdm.runtime import load_model, read_bvh
 
     results = json.loads(args.results.read_text()) if args.results.exists() else []
     args.results.parent.mkdir(parents=True, exist_ok=True)
-    if args.rescore:
-        for row in results:
-            clip = derived_clip(row["clip"], None if row["layout"] == "as shared" else row["layout"], args.work)
-            for variant, scores in row["variants"].items():
-                paths = sorted((args.work / row["tag"] / f"samples-{variant}").glob("*.bvh"))
-                scores.update(score(clip, paths, row["eval_preset"]))
-        args.results.write_text(json.dumps(results, indent=2) + "\n")
-        return
     for name, layout, extra, suffix in CASES:
         tag = f"{Path(name).stem}-{layout or 'as-shared'}{suffix}"
-        if any(r["tag"] == tag for r in results) or (args.only and tag not in args.only):
+        if args.only and tag not in args.only:
             continue
         clip = derived_clip(name, layout, args.work)
         run_dir = args.work / tag
-        began = time.perf_counter()
-        run("sinmdm", "train", str(clip), "--out", str(run_dir), "--preset", "cpu", "--steps", str(args.train_steps),
-            "--width", str(args.width), "--checkpoint-every", str(args.train_steps), *extra,
-            *(["--resume"] if (run_dir / "config.json").exists() else []))
-        train_wall = time.perf_counter() - began
+        row = next((r for r in results if r["tag"] == tag), None)
+        if row is None:
+            began = time.perf_counter()
+            run("sinmdm", "train", str(clip), "--out", str(run_dir), "--preset", "cpu", "--steps", str(args.train_steps),
+                "--width", str(args.width), "--checkpoint-every", str(args.train_steps), *extra,
+                *(["--resume"] if (run_dir / "config.json").exists() else []))
+            train_wall = time.perf_counter() - began
+            config = json.loads((run_dir / "config.json").read_text())
+            reference = read_bvh(clip)
+            fps = load_model(export_trained_window(run_dir, config["window"])).codec.fps
+            row = {"tag": tag, "clip": name, "layout": layout or "as shared", "train_options": extra,
+                   "train_steps": config["step"], "width": args.width, "train_wall_seconds": round(train_wall, 1),
+                   "samples": args.samples, "frames": 2 * round(reference.frames / reference.fps * fps),
+                   "eval_preset": eval_protocol(name), "variants": {}, "date": time.strftime("%Y-%m-%d")}
+            results.append(row)
         config = json.loads((run_dir / "config.json").read_text())
-        model = load_model(export_trained_window(run_dir, config["window"]))
-        reference = read_bvh(clip)
-        frames = 2 * round(reference.frames / reference.fps * model.codec.fps)
-        variants = {}
-        for variant, options in VARIANTS.items():
-            result = generate(model, GenerationRequest(frames=frames, count=args.samples, seed=0, **options))
-            paths = write_outputs(model, result, run_dir / f"samples-{variant}", force=True)
-            variants[variant] = {"options": options, **score(clip, paths, eval_protocol(name))}
-        results.append({
-            "tag": tag, "clip": name, "layout": layout or "as shared", "train_options": extra,
-            "train_steps": config["step"], "width": args.width, "train_wall_seconds": round(train_wall, 1),
-            "samples": args.samples, "frames": frames, "eval_preset": eval_protocol(name),
-            "variants": variants, "date": time.strftime("%Y-%m-%d"),
-        })
-        print(json.dumps({k: v for k, v in results[-1].items() if k != "variants"}), flush=True)
-        args.results.write_text(json.dumps(results, indent=2) + "\n")
+        model = load_model(run_dir / f"model_w{config['window']}.onnx")
+        for seed in args.seeds:
+            for variant, options in VARIANTS.items():
+                key = variant if seed == 0 else f"{variant}@{seed}"
+                if key in row["variants"] and not args.rescore:
+                    continue
+                folder = run_dir / f"samples-{key}"
+                if not args.rescore:
+                    sample(model, row["frames"], row["samples"], seed, options, folder)
+                paths = sorted(folder.glob("*.bvh"))
+                row["variants"][key] = {"options": options, "seed": seed, **score(clip, paths, row["eval_preset"])}
+                args.results.write_text(json.dumps(results, indent=2) + "\n")
+        print(json.dumps({k: v for k, v in row.items() if k != "variants"}), flush=True)
+
+
+def sample(model, frames: int, count: int, seed: int, options: dict, folder: Path) -> None:
+    from sinmdm.runtime import GenerationRequest, generate, write_outputs
+
+    result = generate(model, GenerationRequest(frames=frames, count=count, seed=seed, **options))
+    write_outputs(model, result, folder, force=True)
 
 
 if __name__ == "__main__":

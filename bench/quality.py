@@ -20,6 +20,8 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 MOTIONS = ROOT.parent / "shared" / "motions"
 MIXAMO = ("Joe_",)  # clips scored with the paper's mixamo24 protocol
+# The paper's sampler (no edge margin, no foot cleanup) and what `sinmdm-run sample` does.
+SAMPLER_VARIANTS = {"faithful": {"margin": 0, "cleanup": False}, "default": {}}
 
 
 def run(*args: str) -> None:
@@ -38,7 +40,10 @@ def export_trained_window(run_dir: Path, window: int) -> Path:
 
 
 def sample_and_score(model: Path, clip: Path, out: Path, steps: int, count: int, preset: str,
-                     hop: int | None = None, sampler: str = "ddpm") -> dict:
+                     hop: int | None = None, sampler: str = "ddpm", **options) -> dict:
+    """Sample `count` motions (seeds 0..count-1; `options`: more GenerationRequest fields,
+    e.g. margin=0, cleanup=False for the paper's sampler) and score them: the paper's
+    metrics and the plausibility aggregate."""
     from sinmdm.eval.motion_features import evaluate_files
     from sinmdm.runtime import GenerationRequest, generate, load_model, read_bvh, write_outputs
 
@@ -47,14 +52,15 @@ def sample_and_score(model: Path, clip: Path, out: Path, steps: int, count: int,
     frames = 2 * round(reference.frames / reference.fps * loaded.codec.fps)
     began = time.perf_counter()
     result = generate(loaded, GenerationRequest(frames=frames, count=count, seed=0, steps=steps,
-                                                       hop=hop, sampler=sampler))
+                                                hop=hop, sampler=sampler, **options))
     seconds = time.perf_counter() - began
     paths = write_outputs(loaded, result, out, force=True)
     scores = evaluate_files(clip, paths, preset=preset)
     keys = ("coverage", "global_diversity", "local_diversity", "inter_diversity", "intra_diversity_diff")
     return {**{k: scores[k] for k in keys}, "steps": steps, "samples": count, "frames": frames,
             "sampling_seconds": round(seconds, 2), "eval_preset": preset,
-            "hop": hop or loaded.denoiser_for(frames).window // 2, "sampler": sampler}
+            "hop": hop or loaded.denoiser_for(frames).window // 2, "sampler": sampler, "options": options,
+            "plausibility": (scores.get("plausibility") or {}).get("aggregate")}
 
 
 def main() -> None:
@@ -92,8 +98,10 @@ def main() -> None:
         rows = []
         for steps in args.steps_list:
             count = args.samples if steps < 1000 else args.samples_1000
-            rows.append(sample_and_score(model, clip, run_dir / f"samples_{steps}", steps, count, preset))
-            print(json.dumps(rows[-1]))
+            for variant, options in SAMPLER_VARIANTS.items():
+                rows.append({"variant": variant, **sample_and_score(
+                    model, clip, run_dir / f"samples_{steps}_{variant}", steps, count, preset, **options)})
+                print(json.dumps(rows[-1]))
         results.append({
             "tag": tag, "clip": name, "preset": args.preset, "train_steps": config["step"],
             "train_seconds": config["elapsed_seconds"], "train_wall_seconds": round(train_wall, 1),

@@ -143,7 +143,30 @@ def fast_sampling_table() -> str:
     return "\n".join(lines) + "\n"
 
 
-TABLES = {"QUALITY_TABLE": quality_table, "SPEED_TABLE": speed_table, "TRAIN_SPEED_TABLE": train_speed_table,
+def layouts_table() -> str:
+    """Every shared clip and derived layout, short-trained: the paper's metrics beside
+    the plausibility aggregate, per sampler variant (and seed set)."""
+    entries = results("layouts")
+    if entries is None:
+        return "(no layouts results yet)\n"
+    lines = header("case", "sampler", "coverage %", "global div", "local div", "largest root step (x clip)",
+                   "backward % (clip)", "foot skating cm/s (clip)", "in floor cm (% frames)", "jitter (x clip)",
+                   "plausible")
+    for entry in entries:
+        for key, v in entry["variants"].items():
+            a = (v.get("plausibility") or {}).get("aggregate")
+            if not a:
+                continue
+            lines.append(
+                f"| {entry['tag']} | {key} | {fmt(v['coverage'], 1)} | {fmt(v['global_diversity'])} | {fmt(v['local_diversity'])} "
+                f"| {fmt(a['root_step_max_ratio'])} | {fmt(100 * a['backward_share'], 0)} ({fmt(100 * a['clip_backward_share'], 0)}) "
+                f"| {fmt(a['foot_skating_cm_s'], 1)} ({fmt(a['clip_foot_skating_cm_s'], 1)}) "
+                f"| {fmt(a['penetration_cm'], 1)} ({fmt(100 * a['penetration_share'], 0)}) | {fmt(a['jitter_ratio'], 1)} "
+                f"| {entry['samples'] - a['implausible']}/{entry['samples']} |")
+    return "\n".join(lines) + "\n"
+
+
+TABLES = {"LAYOUTS_TABLE": layouts_table, "QUALITY_TABLE": quality_table, "SPEED_TABLE": speed_table, "TRAIN_SPEED_TABLE": train_speed_table,
           "STEPS_TABLE": steps_table, "RECIPE_TABLE": recipe_table, "FAST_SAMPLING_TABLE": fast_sampling_table}
 
 

@@ -4,7 +4,8 @@ Sampled motion carries its own contact labels (one feature channel per contact
 joint). `cleanup_contacts` turns them into horizontal targets and bends the legs
 with numpy IK so that planted joints stop sliding:
 
-1. Intervals: runs of frames with label > 0.5, at least `MIN_CONTACT_FRAMES` long.
+1. Intervals: runs of frames with label > 0.5 or where the joint moves slower than
+   the codec's contact speed, at least `MIN_CONTACT_FRAMES` long.
    Inside a run the joint's target is its horizontal position averaged over the
    run; its height is kept (only sliding is removed, the foot is never pushed into
    the floor). The IK offset (target - position) fades out over `BLEND_FRAMES`
@@ -34,6 +35,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .animation import Animation
+from .contacts import contact_labels
 from .kinematics import forward_kinematics
 
 CONTACT_THRESHOLD = 0.5  # a label above this is "in contact"
@@ -359,6 +361,10 @@ def cleanup_contacts(animation: Animation, codec, features: np.ndarray,
     local = animation.rotations
     _, positions = forward_kinematics(local, animation.translations, parents)
     limit = MAX_SLIDE * codec.size / codec.scale
+    # A foot the model moves slower than the codec's contact speed is planted too, labelled
+    # or not: the labels miss the ends of many contacts, and those frames slide visibly.
+    slow = contact_labels(positions[:, contacts] * codec.scale, animation.fps, codec.contact_speed).astype(bool)
+    inside = inside | np.stack([contact_mask(slow[:, k]) for k in range(len(contacts))], axis=1)
     inside = np.stack([drop_slides(inside[:, k], positions[:, j], up, limit) for k, j in enumerate(contacts)], axis=1)
     shift = _cycle_shift(codec, local, animation.translations, loop_displacement)
     anchors, weights = np.zeros((animation.frames, len(contacts), 3)), np.zeros((animation.frames, len(contacts)))
