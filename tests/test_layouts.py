@@ -126,3 +126,25 @@ def test_a_z_up_path_drives_a_y_up_model_along_the_same_floor_plan(tmp_path):
     write_bvh(rotated, z_up(read_bvh(source)))
     y_path, z_path = load_trajectory(model, source, 30.0), load_trajectory(model, rotated, 30.0)
     assert np.allclose(y_path.features, z_path.features, atol=1e-9) and np.allclose(y_path.start, z_path.start)
+
+
+@pytest.mark.parametrize("frames", [1, 2, 3])
+def test_a_clip_too_short_to_judge_by_the_feet_stands_on_its_taller_axis(frames):
+    from sinmdm.runtime.bvh import BVH
+
+    bvh = read_bvh(real_clip("Xia_normal.bvh"))
+    short = BVH(bvh.skeleton, bvh.frame_time, bvh.values[:frames])
+    assert build_codec(short).up_axis == 1
+    assert build_codec(z_up(short)).up_axis == 2
+
+
+def test_convert_to_glb_takes_root_and_up(tmp_path):
+    source = tmp_path / "clip.bvh"
+    write_bvh(source, z_up(with_static_root(read_bvh(real_clip("Xia_normal.bvh")))))
+    for up in ("auto", "z"):
+        target = tmp_path / f"clip-{up}.glb"
+        result = run_cli("sinmdm-run", "convert", str(source), str(target), "--up", up, "--root", "Hips")
+        assert result.returncode == 0, result.stderr
+        assert target.stat().st_size > 0
+    result = run_cli("sinmdm-run", "convert", str(source), str(tmp_path / "bad.glb"), "--up", "x")
+    assert result.returncode == 2 and "Traceback" not in result.stderr and not (tmp_path / "bad.glb").exists()

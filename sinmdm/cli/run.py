@@ -140,7 +140,7 @@ def convert(
     if target.suffix.lower() == ".glb":
         from ..preview.gltf import write_glb
 
-        write_glb(out, target, units=units)
+        write_glb(out, target, units=units, root=root, up=up)
     else:
         write_bvh(target, out)
     summary = {"source": str(source), "target": str(target), "frames": out.frames, "fps": out.fps,

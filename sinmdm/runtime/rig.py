@@ -88,6 +88,9 @@ def find_trajectory_joint(animation: Animation, size: float, name: str | None = 
     return positioned[0], f"{skeleton.names[positioned[0]]}: nothing moves, the first joint with position channels"
 
 
+UP_EVIDENCE = 2.0  # the feet must be this much steadier along one axis to decide by them
+
+
 def detect_up_axis(positions: np.ndarray, fps: float, size: float) -> tuple[int, str]:
     """(axis, reason) from world positions (T, J, 3): the axis along which the lowest
     joint of each frame is planted and stays at one height."""
@@ -100,11 +103,12 @@ def detect_up_axis(positions: np.ndarray, fps: float, size: float) -> tuple[int,
         planted = float(np.mean(speed < PLANTED_SPEED * size))
         scores[axis] = wobble / max(planted, 0.05)
     best, other = sorted(scores, key=scores.get)
-    if scores[other] - scores[best] < 1e-9:  # a still, single-pose clip: the taller rest axis
+    ratio = scores[other] / max(scores[best], 1e-12)
+    if ratio < UP_EVIDENCE:  # too little motion to tell (a still or very short clip): the taller axis
         extent = np.ptp(positions.mean(axis=0), axis=0)
         best = max(UP_CANDIDATES, key=lambda a: extent[a])
-        return best, f"{AXIS_NAMES[best].upper()}: the clip does not move, the taller axis of its mean pose"
-    ratio = scores[other] / max(scores[best], 1e-12)
+        return best, (f"{AXIS_NAMES[best].upper()}: the feet say too little ({ratio:.1f}x), "
+                      "the taller axis of the mean pose")
     return best, (f"{AXIS_NAMES[best].upper()}: the feet rest at one height along it "
                   f"({min(ratio, 999):.0f}x steadier than {AXIS_NAMES[other].upper()})")
 
