@@ -4,8 +4,9 @@ Sampled motion carries its own contact labels (one feature channel per contact
 joint). `cleanup_contacts` turns them into horizontal targets and bends the legs
 with numpy IK so that planted joints stop sliding:
 
-1. Intervals: runs of frames with label > 0.5 or where the joint moves slower than
-   the codec's contact speed, at least `MIN_CONTACT_FRAMES` long.
+1. Intervals: runs of frames with label > 0.5 (unless the joint travels further than
+   `MAX_SLIDE` over the run: a label on a swinging limb) or where the joint moves
+   slower than the codec's contact speed, at least `MIN_CONTACT_FRAMES` long.
    Inside a run the joint's target is its horizontal position averaged over the
    run; its height is kept (only sliding is removed, the foot is never pushed into
    the floor). The IK offset (target - position) fades out over `BLEND_FRAMES`
@@ -227,6 +228,11 @@ def find_legs(animation: Animation, codec, positions: np.ndarray) -> list[Leg]:
             for k in ordered if contacts[k] != effector
         )
         legs.append(Leg(effector, hip, knee, ordered, pivots, len(skeleton.rotation_order(effector)) == 3))
+        # Many-jointed legs (a crab's) are short in their last two bones: a second solve one
+        # joint higher reaches what the first could not (a human's hip is the root: no pass).
+        higher = None if hip is None else _pivot(animation, positions, hip, movable)
+        if higher is not None:
+            legs.append(Leg(effector, higher, hip, ordered, (None,) * len(pivots), legs[-1].keep_orientation))
     return legs
 
 
@@ -273,16 +279,20 @@ def two_bone_ik(a: np.ndarray, b: np.ndarray, c: np.ndarray, target: np.ndarray,
 
 def _on_sphere(center: np.ndarray, current: np.ndarray, anchor: np.ndarray, up: int) -> np.ndarray:
     """The point at current's distance from `center` whose horizontal position is the
-    anchor's (or as near as that distance allows), on current's side of center's height:
-    where a bone from `center` must point for its end to stand over the anchor."""
+    anchor's (or as near as that distance allows), on current's side of center's height
+    and never lower than current: where a bone from `center` must point for its end to
+    stand over the anchor without being pushed into the floor (a toe swung towards its
+    pin would otherwise dip by up to 5 cm)."""
     radius = np.linalg.norm(current - center, axis=-1)
     flat = anchor - center
     flat[..., up] = 0.0
     direction, distance = _unit(flat)
     distance = np.minimum(distance, radius)
     side = np.where(current[..., up] >= center[..., up], 1.0, -1.0)
+    rise = np.maximum(side * np.sqrt(np.maximum(radius**2 - distance**2, 0.0)), current[..., up] - center[..., up])
+    distance = np.sqrt(np.maximum(radius**2 - rise**2, 0.0))
     point = center + direction * distance[..., None]
-    point[..., up] += side * np.sqrt(np.maximum(radius**2 - distance**2, 0.0))
+    point[..., up] = center[..., up] + rise
     return point
 
 
@@ -314,7 +324,7 @@ def _solve_leg(local: np.ndarray, translations: np.ndarray, parents: np.ndarray,
         return local
     e, k = leg.effector, leg.knee
     out = local.copy()
-    target = pos[:, e] + shift
+    target = targets.positions[:, e] + shift  # from the pose before cleanup: a second pass aims at the same spot
     if leg.hip is not None:
         h = leg.hip
         hinge = _hinge_axes(pos[:, h], pos[:, k], pos[:, e], glob[:, h])
@@ -361,11 +371,11 @@ def cleanup_contacts(animation: Animation, codec, features: np.ndarray,
     local = animation.rotations
     _, positions = forward_kinematics(local, animation.translations, parents)
     limit = MAX_SLIDE * codec.size / codec.scale
+    inside = np.stack([drop_slides(inside[:, k], positions[:, j], up, limit) for k, j in enumerate(contacts)], axis=1)
     # A foot the model moves slower than the codec's contact speed is planted too, labelled
     # or not: the labels miss the ends of many contacts, and those frames slide visibly.
     slow = contact_labels(positions[:, contacts] * codec.scale, animation.fps, codec.contact_speed).astype(bool)
     inside = inside | np.stack([contact_mask(slow[:, k]) for k in range(len(contacts))], axis=1)
-    inside = np.stack([drop_slides(inside[:, k], positions[:, j], up, limit) for k, j in enumerate(contacts)], axis=1)
     shift = _cycle_shift(codec, local, animation.translations, loop_displacement)
     anchors, weights = np.zeros((animation.frames, len(contacts), 3)), np.zeros((animation.frames, len(contacts)))
     for k, joint in enumerate(contacts):
