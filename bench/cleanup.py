@@ -21,12 +21,27 @@ from pathlib import Path
 
 import numpy as np
 
-from sinmdm.eval.motion_features import evaluate_files
+from sinmdm.eval import metrics
+from sinmdm.eval.motion_features import eval_features, evaluate_files, protocol_for
 from sinmdm.runtime import GenerationRequest, generate, load_model, read_bvh, write_outputs
 from sinmdm.runtime.animation import animation_from_bvh, global_positions
 from sinmdm.runtime.model import DEMO_MODEL
 
 KEYS = ("coverage", "global_diversity", "local_diversity")
+
+
+def contact_split(clip: Path, samples: list, protocol: str) -> dict:
+    """What the paper's diversity reads: the share of frames whose contact bit is set
+    (samples against the clip), and the metrics on the rotation columns alone."""
+    reference = read_bvh(clip)
+    chosen = protocol_for(reference, protocol, None)
+    ref = eval_features(reference, chosen)
+    own = [eval_features(s, chosen) for s in samples]
+    contacts = len(chosen.contact_joints)
+    rotations = metrics.evaluate(ref[:, : ref.shape[1] - contacts], [f[:, : f.shape[1] - contacts] for f in own], seed=0)
+    return {"contact_share": np.concatenate(own)[:, ref.shape[1] - contacts :].mean(axis=0).round(3).tolist(),
+            "clip_contact_share": ref[:, ref.shape[1] - contacts :].mean(axis=0).round(3).tolist(),
+            "rotations_only": {k: rotations[k] for k in KEYS}}
 
 
 def measure(model, clip: Path, frames: int, count: int, seed: int, cleanup: bool, protocol: str) -> tuple[dict, list]:
@@ -35,7 +50,8 @@ def measure(model, clip: Path, frames: int, count: int, seed: int, cleanup: bool
         paths = write_outputs(model, result, Path(tmp), force=True)
         scores = evaluate_files(clip, paths, preset=protocol)
     aggregate = scores["plausibility"]["aggregate"]
-    return {**{k: scores[k] for k in KEYS}, "foot_skating_cm_s": aggregate["foot_skating_cm_s"],
+    return {**{k: scores[k] for k in KEYS}, **contact_split(clip, result.clips, protocol),
+            "foot_skating_cm_s": aggregate["foot_skating_cm_s"],
             "clip_foot_skating_cm_s": aggregate["clip_foot_skating_cm_s"],
             "per_sample_skating_cm_s": [r["foot_skating_cm_s"] for r in scores["plausibility"]["samples"]],
             "implausible": aggregate["implausible"]}, result.clips
@@ -99,7 +115,10 @@ def main() -> None:
                     first_off = clips[0]
             print(f"seed {seed} cleanup {'on ' if cleanup else 'off'}: skating {scores['foot_skating_cm_s']:.2f} cm/s "
                   f"(clip {scores['clip_foot_skating_cm_s']:.2f}), coverage {scores['coverage']:.1f}, "
-                  f"global {scores['global_diversity']:.3f}, local {scores['local_diversity']:.3f}", flush=True)
+                  f"global {scores['global_diversity']:.3f}, local {scores['local_diversity']:.3f}; contact bits set on "
+                  f"{scores['contact_share']} of frames (clip {scores['clip_contact_share']}); rotations only: global "
+                  f"{scores['rotations_only']['global_diversity']:.3f}, local {scores['rotations_only']['local_diversity']:.3f}",
+                  flush=True)
     if args.results:
         rows = json.loads(args.results.read_text()) if args.results.exists() else []
         rows = [r for r in rows if (r["model"], r["clip"]) != (row["model"], row["clip"])] + [row]
