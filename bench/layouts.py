@@ -54,7 +54,6 @@ def derived_clip(name: str, layout: str | None, work: Path) -> Path:
     return path
 
 
-VARIANTS = SAMPLER_VARIANTS
 KEYS = ("coverage", "global_diversity", "local_diversity")
 
 
@@ -106,7 +105,7 @@ def main() -> None:
         config = json.loads((run_dir / "config.json").read_text())
         model = load_model(run_dir / f"model_w{config['window']}.onnx")
         for seed in args.seeds:
-            for variant, options in VARIANTS.items():
+            for variant, options in SAMPLER_VARIANTS.items():
                 key = variant if seed == 0 else f"{variant}@{seed}"
                 if key in row["variants"] and not args.rescore:
                     continue

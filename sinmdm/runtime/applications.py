@@ -6,7 +6,7 @@ output length, and the root's start position."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -15,7 +15,7 @@ from .bvh import read_bvh
 from .errors import SinMDMError
 from .animation import Animation, animation_from_bvh, nominal_fps
 from .features import build_codec, check_same_skeleton, skeleton_size
-from .generate import GenerationRequest, GenerationResult, decode_clip, generate
+from .generate import GenerationRequest, GenerationResult, generate
 from .masks import feature_channels, frame_ramp, joint_names, trajectory_channels
 from .model import MotionModel
 from .sampler import Guide
@@ -194,30 +194,26 @@ def plan_harmonize(model: MotionModel, reference: Reference, factor: int = 2, fr
     return Plan(Guide(reference=composite, keep=keep, harmonize=region, factor=factor), frames, reference.start, reference=reference)
 
 
-def land_on_reference(model: MotionModel, plan: Plan, result: GenerationResult, cleanup: bool = True) -> GenerationResult:
-    """After in-betweening, spread the root's x/z drift over the generated gap so the
-    kept end lands where it stands in the reference (clips re-decoded, with the contact
-    cleanup when `cleanup`)."""
+def land_on_reference(model: MotionModel, plan: Plan, features: np.ndarray) -> np.ndarray:
+    """After in-betweening, spread the root's x/z drift over the generated gap of the
+    sampled (count, frames, F) features so the kept end lands where it stands in the reference."""
     if plan.fix_root is None or plan.reference is None:
-        return result
+        return features
     root = model.codec.layout.indices(("root",))
     if not len(root):
-        return result
+        return features
     gap_start, gap_stop = plan.fix_root
     dx, dz = root[0], root[2]
-    features = result.features.copy()
+    features = features.copy()
     ref = plan.reference.features
     for sample in features:
         for channel in (dx, dz):
             want = ref[gap_start + 1 : gap_stop + 1, channel].sum()
             got = sample[gap_start + 1 : gap_stop + 1, channel].sum()
             sample[gap_start + 1 : gap_stop + 1, channel] += (want - got) / (gap_stop - gap_start)
-    clips = [decode_clip(model, f, plan.start, cleanup, keep=plan.guide.keep) for f in features]
-    return GenerationResult(features, clips, result.seeds, result.seconds)
+    return features
 
 
 def run_plan(model: MotionModel, plan: Plan, request: GenerationRequest, progress=None) -> GenerationResult:
-    request = GenerationRequest(plan.frames, request.count, request.seed, request.sampler, request.steps, request.eta, request.hop,
-                                cleanup=request.cleanup, margin=request.margin)
-    result = generate(model, request, guide=plan.guide, start=plan.start, progress=progress)
-    return land_on_reference(model, plan, result, cleanup=request.cleanup)
+    return generate(model, replace(request, frames=plan.frames), guide=plan.guide, start=plan.start, progress=progress,
+                    adjust=lambda features: land_on_reference(model, plan, features))

@@ -38,6 +38,7 @@ import numpy as np
 from .animation import Animation
 from .contacts import contact_labels
 from .kinematics import forward_kinematics
+from .rig import ancestors
 
 CONTACT_THRESHOLD = 0.5  # a label above this is "in contact"
 MIN_CONTACT_FRAMES = 2  # shorter runs are noise
@@ -169,19 +170,11 @@ def _descendants(parents: np.ndarray, joint: int) -> set[int]:
     return out
 
 
-def _ancestors(parents: np.ndarray, joint: int) -> list[int]:
-    chain, j = [], int(parents[joint])
-    while j >= 0:
-        chain.append(j)
-        j = int(parents[j])
-    return chain
-
-
 def _pivot(animation: Animation, positions: np.ndarray, joint: int, movable: set[int]) -> int | None:
     """The nearest ancestor that can rotate (three rotation channels, allowed) and is
     not at the joint's own position."""
     size = np.ptp(positions[0], axis=0).max() + _EPS
-    for j in _ancestors(animation.skeleton.parents, joint):
+    for j in reversed(ancestors(animation.skeleton, joint)):  # nearest first
         if j not in movable:
             return None
         if len(animation.skeleton.rotation_order(j)) == 3:
@@ -199,10 +192,10 @@ def find_legs(animation: Animation, codec, positions: np.ndarray) -> list[Leg]:
     skeleton, parents = animation.skeleton, animation.skeleton.parents
     contacts = list(codec.contact_joints)
     frozen = set(codec.fixed_joints) | ({codec.trajectory_joint} if codec.trajectory_joint is not None else set())
-    tops = [c for c in contacts if not set(_ancestors(parents, c)) & set(contacts)]
+    tops = [c for c in contacts if not set(ancestors(skeleton, c)) & set(contacts)]
     legs = []
     for top in tops:
-        members = [k for k, c in enumerate(contacts) if c == top or top in _ancestors(parents, c)]
+        members = [k for k, c in enumerate(contacts) if c == top or top in ancestors(skeleton, c)]
         others = set(contacts) - {contacts[k] for k in members}
 
         def allowed(j: int) -> bool:  # rotating j moves no other leg, no root, nothing frozen
@@ -222,7 +215,7 @@ def find_legs(animation: Animation, codec, positions: np.ndarray) -> list[Leg]:
         if knee is None:
             continue
         below = _descendants(parents, effector)
-        ordered = tuple(sorted(members, key=lambda k: len(_ancestors(parents, contacts[k]))))
+        ordered = tuple(sorted(members, key=lambda k: len(ancestors(skeleton, contacts[k]))))
         pivots = tuple(
             p if (p := _pivot(animation, positions, contacts[k], movable)) is not None and p in below else None
             for k in ordered if contacts[k] != effector
@@ -366,7 +359,7 @@ def cleanup_contacts(animation: Animation, codec, features: np.ndarray,
     inside = np.stack([contact_mask(labels[:, k]) for k in range(len(contacts))], axis=1)
     if not inside.any():
         return animation
-    up = int(getattr(codec, "up_axis", 1))
+    up = codec.up_axis
     parents = animation.skeleton.parents
     local = animation.rotations
     _, positions = forward_kinematics(local, animation.translations, parents)

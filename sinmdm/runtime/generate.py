@@ -58,17 +58,21 @@ def generate(
     guide: Guide | None = None,
     start: np.ndarray | None = None,
     progress: Callable[[int, int], None] | None = None,
+    adjust: Callable[[np.ndarray], np.ndarray] | None = None,
 ) -> GenerationResult:
-    """Sample `request.count` motions; clip i is reproducible alone with seed `request.seed + i`."""
+    """Sample `request.count` motions; clip i is reproducible alone with seed `request.seed + i`.
+    `adjust` maps the sampled (count, frames, F) features to the ones decoded and returned."""
     began = time.perf_counter()
     features = sample_features(
         model, request.frames, count=request.count, seed=request.seed, sampler=request.sampler,
         steps=request.steps, eta=request.eta, hop=request.hop, guide=guide, progress=progress,
         loop=request.loop, margin=request.margin,
     )
+    if adjust is not None:
+        features = adjust(features)
     origin = model.start_position if start is None else start
     displacement = cycle_displacement(model.codec, features) if request.loop else None
-    keep = None if guide is None or guide.keep is None else guide.keep
+    keep = None if guide is None else guide.keep
     clips = [decode_clip(model, f, origin, request.cleanup, None if displacement is None else displacement[i], keep)
              for i, f in enumerate(features)]
     seeds = [request.seed + i for i in range(request.count)]
