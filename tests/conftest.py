@@ -44,7 +44,7 @@ def no_torch_env(tmp_path: Path) -> dict:
     return {"PYTHONPATH": str(blocker)}
 
 
-TINY_TRAIN_ARGS = ["--width", "32", "--batch", "4", "--crop", "48", "--checkpoint-every", "5"]
+TINY_TRAIN_ARGS = ["--width", "32", "--batch", "4", "--crop", "48", "--checkpoint-every", "5", "--check-every", "0"]
 
 
 @pytest.fixture(scope="session")

@@ -18,7 +18,8 @@ RefFps = typer.Option(None, "--ref-fps", help="Override the reference's frame ra
 Count = typer.Option(1, "--count", "-n", help="How many motions (sample i uses seed + i).")
 Seed = typer.Option(0, "--seed")
 Sampler = typer.Option("ddpm", "--sampler", help="ddpm or ddim.")
-Steps = typer.Option(DEFAULT_STEPS, "--steps", help="Denoising steps (1000 = the paper's full chain).")
+Steps = typer.Option(None, "--steps", help="Denoising steps (default: the model's measured setting, else "
+                     f"{DEFAULT_STEPS}; 1000 = the paper's full chain).")
 Out = typer.Option(Path("sinmdm_out"), "--out", "-o", help="Output directory.")
 Force = typer.Option(False, "--force", help="Overwrite existing files.")
 Json = typer.Option(False, "--json", help="Print a JSON summary.")
@@ -33,6 +34,7 @@ def _run(command: str, models, ref: Path, ref_fps, count, seed, sampler, steps, 
     from ..runtime.model import load_model
 
     model = load_model(models or None)
+    steps = model.default_steps if steps is None else steps
     plan = make_plan(model, lambda: load_reference(model, ref, ref_fps))
     request = GenerationRequest(frames=plan.frames, count=count, seed=seed, sampler=sampler, steps=steps, cleanup=cleanup)
     result = run_plan(model, plan, request)
@@ -147,7 +149,8 @@ def register(app: typer.Typer) -> None:
             span = _range(frames)
             base = None
             if span or joints:
-                request = GenerationRequest(frames=reference.frames, count=1, seed=seed, sampler=sampler, steps=steps)
+                request = GenerationRequest(frames=reference.frames, count=1, seed=seed, sampler=sampler,
+                                            steps=m.default_steps if steps is None else steps)
                 base = generate(m, request).features[0]
             return plan_harmonize(m, reference, factor, span, joints, base, border)
 

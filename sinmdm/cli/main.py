@@ -46,11 +46,17 @@ def train(
     contacts: Optional[str] = typer.Option(None, "--contacts", help="Comma-separated contact joints (default: detected)."),
     root: Optional[str] = RootOption,
     up: str = UpOption,
+    check_every: Optional[int] = typer.Option(None, "--check-every", help="Iterations between quality checks of the "
+                                              "EMA weights (cpu preset: 200; 0 = never): the best-balanced is kept and exported."),
+    patience: Optional[int] = typer.Option(None, "--patience", help="Checks without improvement, once in the quality "
+                                           "band, before training stops early (default 3; --steps trains to the end)."),
     norm: Optional[str] = typer.Option(None, "--norm", help="group (the paper's GroupNorm over the window) or frame (per-frame, a strictly local model; see BENCHMARKS.md)."),
 ) -> None:
     """Train a denoiser on one clip."""
     _require_torch()
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+
+    from dataclasses import replace
 
     from ..train.model import NORM_KINDS
     from ..train.presets import preset as get_preset
@@ -58,9 +64,14 @@ def train(
 
     if norm is not None and norm not in NORM_KINDS:
         raise SinMDMError(f"--norm must be {' or '.join(NORM_KINDS)}, got '{norm}'")
+    if check_every is not None and check_every < 0:
+        raise SinMDMError(f"--check-every must be 0 (never) or more, got {check_every}")
     config = get_preset(preset).with_overrides(
-        steps=steps, width=width, crop=crop, batch=batch, checkpoint_every=checkpoint_every, fps=fps, norm=norm
+        steps=steps, width=width, crop=crop, batch=batch, checkpoint_every=checkpoint_every, fps=fps, norm=norm,
+        early_stop=False if steps else None, patience=patience,  # --steps forces a fixed budget: the watch still keeps the best
     )
+    if check_every is not None:
+        config = config.with_overrides(check_every=check_every or None) if check_every else replace(config, check_every=None)
     codec_options = {"units": units, "source_fps": source_fps, "root": root, "up": up,
                      "contacts": "auto" if not contacts else [c.strip() for c in contacts.split(",")]}
     if units == "auto" and not resume:
@@ -75,14 +86,31 @@ def train(
         def on_progress(step: int, total: int, loss: float, rate: float) -> None:
             progress.update(task, completed=step, loss=loss, rate=rate)
 
+        def on_check(step: int, scores: dict, best_step: int) -> None:
+            progress.console.print(f"check at step {step}: {_scores_line(scores)}"
+                                   + ("  [bold]best[/bold]" if best_step == step else f"  (best: step {best_step})"))
+
         result = run_training(clip, out, config, seed=seed, device=device, resume=resume,
-                              codec_options=codec_options, on_progress=on_progress)
+                              codec_options=codec_options, on_progress=on_progress, on_check=on_check)
         progress.update(task, completed=result["step"])
     console.print(
         f"run [bold]{out}[/bold]: step {result['step']}/{result['steps']}, loss {result['loss']}, "
         f"{result['parameters']:,} parameters, window {result['window']} frames, "
         f"{result['elapsed_seconds']:.0f} s of training"
     )
+    watch = result.get("watch")
+    if watch and watch.get("best"):
+        console.print(f"kept step {watch['best_step']} (best balance): {_scores_line(watch['best'])}"
+                      + (f"; stopped early: {watch['stopped']}" if watch.get("stopped") else ""))
+    if result.get("sampling"):
+        sampling = result["sampling"]
+        console.print(f"sampling defaults measured on it: {sampling['steps']} steps, hop {sampling['hop']}")
+
+
+def _scores_line(scores: dict) -> str:
+    return (f"coverage {scores['coverage']:.1f} %, global {scores['global_diversity']:.2f}, "
+            f"local {scores['local_diversity']:.2f}, balance {scores['balance']:.3f}, "
+            f"jitter {scores['jitter_ratio']:.1f}x ({scores['check_seconds']:.1f} s)")
 
 
 def _warn_about_units(clip: Path, fps: float, codec_options: dict) -> None:
@@ -119,6 +147,8 @@ def info(
         "device": config["device"],
         "train": config["train"],
         "model": config["model"],
+        "watch": config.get("watch"),
+        "sampling": config.get("sampling"),
     }
     if as_json:
         print_json(summary)
@@ -130,6 +160,31 @@ def info(
         table.add_row(key.replace("_", " "), f"{value:,}" if isinstance(value, int) and not isinstance(value, bool) else str(value))
     table.add_row("clip", f"{config['clip']['name']} ({config['clip']['frames']} frames, sha256 {config['clip']['sha256'][:12]})")
     console.print(table)
+    watch = config.get("watch") or {}
+    if watch.get("best"):
+        console.print(f"kept: step {watch['best_step']} of {watch['checks']} checks, {_scores_line(watch['best'])}")
+        if watch.get("stopped"):
+            console.print(f"stopped early: {watch['stopped']}")
+        _print_checks(run_dir)
+    if config.get("sampling"):
+        sampling = config["sampling"]
+        console.print(f"sampling defaults: {sampling['steps']} steps, hop {sampling['hop']} "
+                      f"(coverage {sampling['scores']['coverage']:.1f} %, global {sampling['scores']['global_diversity']:.2f})")
+
+
+def _print_checks(run_dir: Path) -> None:
+    from ..train.checkpoint import read_log
+
+    checks = [r for r in read_log(run_dir) if "check" in r]
+    table = Table(title="quality checks (EMA weights)")
+    for column in ("step", "coverage %", "global", "local", "balance", "jitter", "s"):
+        table.add_column(column, justify="right")
+    for record in checks:
+        c = record["check"]
+        table.add_row(str(record["step"]), f"{c['coverage']:.1f}", f"{c['global_diversity']:.2f}",
+                      f"{c['local_diversity']:.2f}", f"{c['balance']:.3f}", f"{c['jitter_ratio']:.1f}",
+                      f"{c['check_seconds']:.1f}")
+    console.print(table)
 
 
 @app.command()
@@ -139,13 +194,15 @@ def export(
     window: Optional[list[int]] = typer.Option(None, "--window", "-w", help="Window length(s) in frames (default: the training length)."),
     opset: int = typer.Option(18, "--opset", help="ONNX opset: 18 (default) or 17."),
     force: bool = typer.Option(False, "--force", help="Overwrite existing files."),
+    checkpoint: str = typer.Option("best", "--checkpoint", help="best (the quality watch's best-balanced check, "
+                                   "when the run kept one) or last (the final weights)."),
     as_json: bool = typer.Option(False, "--json", help="Print a JSON summary."),
 ) -> None:
     """Export the denoiser to ONNX, one verified graph per window length."""
     _require_torch()
     from ..export.onnx_export import export_run
 
-    results = export_run(run_dir, out, windows=window or None, opset=opset, force=force,
+    results = export_run(run_dir, out, windows=window or None, opset=opset, force=force, checkpoint=checkpoint,
                          on_warning=lambda text: console.print(f"[yellow]warning:[/yellow] {text}"))
     if as_json:
         print_json([{"path": str(r.path), "window": r.window, "max_abs_diff": r.max_abs_diff, "opset": r.opset,

@@ -176,9 +176,11 @@ def sample(
     count: int = typer.Option(1, "--count", "-n", help="How many motions (sample i uses seed + i)."),
     seed: int = typer.Option(0, "--seed"),
     sampler: str = typer.Option("ddpm", "--sampler", help="ddpm (ancestral) or ddim (deterministic with --eta 0)."),
-    steps: int = typer.Option(DEFAULT_STEPS_CLI, "--steps", help="Denoising steps (1000 = the paper's full chain)."),
+    steps: Optional[int] = typer.Option(None, "--steps", help="Denoising steps (default: the model's measured setting "
+                                        f"from training, else {DEFAULT_STEPS_CLI}; 1000 = the paper's full chain)."),
     eta: float = typer.Option(0.0, "--eta", help="DDIM noise (0 = deterministic)."),
-    hop: Optional[int] = typer.Option(None, "--hop", help="Frames between overlapping windows (default: half a window)."),
+    hop: Optional[int] = typer.Option(None, "--hop", help="Frames between overlapping windows (default: the model's "
+                                      "measured setting, else half a window)."),
     loop: bool = typer.Option(False, "--loop", help="A seamless cycle: the file holds T frames whose last flows into the "
                               "first; the root moves by the loop displacement (summary) each cycle. At least one window long."),
     margin: int = typer.Option(EDGE_MARGIN, "--margin", help="Frames sampled beyond each end and cut off "
@@ -200,6 +202,8 @@ def sample(
 
     model = load_model(models or None, threads=threads)
     length = _length(model, seconds, frames, force)
+    steps = model.default_steps if steps is None else steps
+    hop = model.default_hop(length) if hop is None else hop
     request = GenerationRequest(frames=length, count=count, seed=seed, sampler=sampler, steps=steps, eta=eta, hop=hop,
                                 loop=loop, cleanup=cleanup, margin=margin)
     with _progress(f"sampling {count} x {length} frames") as progress:
@@ -209,7 +213,7 @@ def sample(
     summary = {
         "model": [str(d.path) for d in model.denoisers.values()],
         "frames": length, "fps": model.codec.fps, "seconds": length / model.codec.fps,
-        "count": count, "seed": seed, "sampler": sampler, "steps": steps, "cleanup": cleanup,
+        "count": count, "seed": seed, "sampler": sampler, "steps": steps, "hop": hop, "cleanup": cleanup,
         "elapsed_seconds": round(result.seconds, 3), "files": [str(p) for p in written],
     }
     if loop:

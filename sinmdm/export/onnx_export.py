@@ -149,11 +149,12 @@ def export_run(
     opset: int = DEFAULT_OPSET,
     force: bool = False,
     on_warning=None,
+    checkpoint: str = "best",
 ) -> list[ExportResult]:
     """Write `<out stem>_w<W>.onnx` for each window; verify each before it appears."""
     if opset not in SUPPORTED_OPSETS:
         raise SinMDMError(f"opset {opset} is not supported: use one of {SUPPORTED_OPSETS}")
-    model, config = load_trained_model(Path(run_dir))
+    model, config = load_trained_model(Path(run_dir), checkpoint=checkpoint)
     if not config.get("finished"):
         raise SinMDMError(
             f"{run_dir} has no finished checkpoint (step {config['step']} of {config['steps']}): "
@@ -191,11 +192,15 @@ def export_run(
             "receptive_field": field,
             "model": config["model"],
             "model_id": model_id,
+            # the sampler settings measured with these weights (`sinmdm-run sample` uses them)
+            "sampling_defaults": {k: config["sampling"][k] for k in ("steps", "hop")} if config.get("sampling") else None,
             "provenance": {
                 "clip": config["clip"]["name"],
                 "clip_sha256": config["clip"]["sha256"],
                 "preset": config["train"]["preset"],
                 "steps": config["step"],
+                "checkpoint": config["chosen"],
+                "sampling_scores": (config.get("sampling") or {}).get("scores"),
                 "loss": config["loss"],
                 "train": config["train"],
                 "exported": datetime.now(timezone.utc).isoformat(timespec="seconds"),

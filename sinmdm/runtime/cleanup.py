@@ -44,6 +44,7 @@ CONTACT_THRESHOLD = 0.5  # a label above this is "in contact"
 MIN_CONTACT_FRAMES = 2  # shorter runs are noise
 BLEND_FRAMES = 4  # frames of fade in before and out after a contact run
 SHORT_BONE = 0.5  # an end bone shorter than this share of the bone above it is a toe, not a shin
+GROW_PASSES = 2  # extra passes that pin the frames a pass slowed down (see cleanup_contacts)
 MAX_SLIDE = 0.25  # a "contact" over which the joint travels further (share of the character's size) is a label error
 _EPS = 1e-9
 
@@ -370,6 +371,29 @@ def cleanup_contacts(animation: Animation, codec, features: np.ndarray,
     slow = contact_labels(positions[:, contacts] * codec.scale, animation.fps, codec.contact_speed).astype(bool)
     inside = inside | np.stack([contact_mask(slow[:, k]) for k in range(len(contacts))], axis=1)
     shift = _cycle_shift(codec, local, animation.translations, loop_displacement)
+    legs = find_legs(animation, codec, positions)
+    free = [_free(codec, leg, keep) for leg in legs]
+    for _ in range(GROW_PASSES + 1):
+        local = _pin(animation, codec, legs, free, positions, inside, shift)
+        # Pinning a joint slows its neighbours on the chain (a planted ankle drags the ball of
+        # the foot): frames the cleaned motion moves slower than the contact speed are planted
+        # too, so the next pass pins them instead of letting them slide at the blend's speed.
+        _, cleaned = forward_kinematics(local, animation.translations, parents)
+        slow = contact_labels(cleaned[:, contacts] * codec.scale, animation.fps, codec.contact_speed).astype(bool)
+        grown = inside | np.stack([contact_mask(slow[:, k]) for k in range(len(contacts))], axis=1)
+        grown = np.stack([drop_slides(grown[:, k], positions[:, j], up, limit) for k, j in enumerate(contacts)], axis=1)
+        if (grown == inside).all():
+            break
+        inside = grown
+    finite = np.isfinite(local).all(axis=(-1, -2))  # never NaN: a joint whose solve failed keeps its pose
+    rotations = np.where(finite[..., None, None], local, animation.rotations)
+    return Animation(animation.skeleton, rotations, animation.translations, animation.fps)
+
+
+def _pin(animation: Animation, codec, legs: list[Leg], free: list, positions: np.ndarray, inside: np.ndarray,
+         shift: np.ndarray | None) -> np.ndarray:
+    """Local rotations with every leg solved for the contact frames `inside` (T, C)."""
+    up, contacts = codec.up_axis, list(codec.contact_joints)
     anchors, weights = np.zeros((animation.frames, len(contacts), 3)), np.zeros((animation.frames, len(contacts)))
     for k, joint in enumerate(contacts):
         if inside[:, k].any():
@@ -377,13 +401,11 @@ def cleanup_contacts(animation: Animation, codec, features: np.ndarray,
                 anchors[:, k], weights[:, k] = contact_offsets(positions[:, joint], inside[:, k], up)
             else:
                 anchors[:, k], weights[:, k] = _cyclic_offsets(positions[:, joint], inside[:, k], shift, up, BLEND_FRAMES)
-    legs = find_legs(animation, codec, positions)
     targets = _Targets(positions, anchors, weights, up)
-    for leg in legs:
-        local = _solve_leg(local, animation.translations, parents, leg, contacts, targets, _free(codec, leg, keep))
-    finite = np.isfinite(local).all(axis=(-1, -2))  # never NaN: a joint whose solve failed keeps its pose
-    rotations = np.where(finite[..., None, None], local, animation.rotations)
-    return Animation(animation.skeleton, rotations, animation.translations, animation.fps)
+    local = animation.rotations
+    for leg, leg_free in zip(legs, free):
+        local = _solve_leg(local, animation.translations, animation.skeleton.parents, leg, contacts, targets, leg_free)
+    return local
 
 
 def _free(codec, leg: Leg, keep: np.ndarray | None) -> np.ndarray | float:

@@ -60,6 +60,23 @@ class MotionModel:
     def features(self) -> int:
         return self.codec.width
 
+    @property
+    def default_steps(self) -> int:
+        """Denoising steps measured with these weights at training (export metadata), else 50."""
+        from .sampler import DEFAULT_STEPS
+
+        value = (self.metadata.get("sampling_defaults") or {}).get("steps")
+        return int(value) if isinstance(value, int) and 1 <= value <= len(self.alphas_cumprod) else DEFAULT_STEPS
+
+    def default_hop(self, frames: int) -> int | None:
+        """The measured hop (frames at the training window), scaled to the window `frames`
+        uses; None (half a window) when the model carries none."""
+        value = (self.metadata.get("sampling_defaults") or {}).get("hop")
+        if not isinstance(value, int) or not 1 <= value <= self.trained_window:
+            return None
+        window = self.denoiser_for(frames).window
+        return max(1, min(window, round(value * window / self.trained_window)))
+
     def denoiser_for(self, frames: int) -> OnnxDenoiser:
         """The trained window when present, else the smallest window that covers `frames`
         (or the largest one for longer requests)."""

@@ -60,3 +60,19 @@ def load_state(run_dir: Path) -> dict[str, Any]:
     if not isinstance(state, dict) or "model" not in state or "step" not in state:
         raise SinMDMError(f"checkpoint {path} is incomplete")
     return state
+
+
+def read_log(run_dir: Path) -> list[dict]:
+    """The run's log records (lines that are not JSON objects, e.g. cut by a kill, are skipped)."""
+    path = Path(run_dir) / LOG
+    if not path.is_file():
+        return []
+    records = []
+    for line in path.read_text(encoding="utf-8", errors="replace").splitlines():
+        try:
+            record = json.loads(line)
+        except json.JSONDecodeError:
+            continue
+        if isinstance(record, dict):
+            records.append(record)
+    return records

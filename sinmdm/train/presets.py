@@ -26,6 +26,11 @@ class TrainConfig:
     fps: float = 30.0
     checkpoint_every: int = 200
     log_every: int = 10
+    # The watch (watch.py): score the EMA weights every `check_every` steps (None: never),
+    # keep the best-balanced checkpoint, stop `patience` checks after the best once in band.
+    check_every: int | None = None
+    patience: int = 3
+    early_stop: bool = True
 
     def to_dict(self) -> dict:
         data = asdict(self)
@@ -55,6 +60,7 @@ PRESETS = {
         lr_schedule="linear-tail",
         ema=0.999,
         bf16=True,
+        check_every=200,
     ),
 }
 

@@ -15,8 +15,8 @@ import numpy as np
 import torch
 
 from .. import __version__
-from ..runtime.atomic import check_writable_dir, write_text_atomic
-from ..runtime.bvh import read_bvh
+from ..runtime.atomic import atomic_path, check_writable_dir, write_text_atomic
+from ..runtime.bvh import BVH, read_bvh
 from ..runtime.errors import SinMDMError
 from ..runtime.features import MotionCodec, build_codec
 from ..runtime.schedule import NUM_TIMESTEPS
@@ -25,6 +25,7 @@ from .data import BatchSampler
 from .diffusion import GaussianDiffusion
 from .model import Denoiser, ModelConfig, count_parameters, receptive_field
 from .presets import TrainConfig
+from .watch import BEST, QualityWatch, WatchState, sampling_defaults
 
 
 def resolve_device(name: str = "auto") -> torch.device:
@@ -69,6 +70,7 @@ class ClipData:
     features: np.ndarray  # (T, F)
     start: np.ndarray  # (x, z) of the trajectory joint at frame 0, metres
     info: dict
+    bvh: BVH
 
 
 def load_clip(path: Path, fps: float, codec_options: dict) -> ClipData:
@@ -85,7 +87,7 @@ def load_clip(path: Path, fps: float, codec_options: dict) -> ClipData:
         "source_fps": codec_options.get("source_fps") or bvh.fps,
     }
     start = codec.start_position(bvh, source_fps=codec_options.get("source_fps"))
-    return ClipData(codec, features, start, info)
+    return ClipData(codec, features, start, info, bvh)
 
 
 class Run:
@@ -112,6 +114,9 @@ class Run:
         clip_tensor = torch.from_numpy(clip.features.T.copy())
         self.sampler = BatchSampler(clip_tensor, config, self.generator)
         self.step = 0
+        self.watch = WatchState()
+        self.stopped: str | None = None  # why the watch ended the run early
+        self.sampling: dict | None = None  # sampling defaults measured on the kept weights
         self.loss = float("nan")
         self.elapsed = 0.0
         self.autocast = config.bf16 and bf16_supported(device)
@@ -127,6 +132,9 @@ class Run:
             "data_rng": self.generator.get_state(),
             "loss": self.loss,
             "elapsed": self.elapsed,
+            "watch": self.watch.to_dict(),
+            "stopped": self.stopped,
+            "sampling": self.sampling,
         }
         if self.ema is not None:
             state["ema"] = self.ema.state_dict()
@@ -150,6 +158,13 @@ class Run:
         self.step = int(state["step"])
         self.loss = float(state.get("loss", float("nan")))
         self.elapsed = float(state.get("elapsed", 0.0))
+        self.watch = WatchState.from_dict(state.get("watch"))
+        self.stopped = state.get("stopped")
+        self.sampling = state.get("sampling")
+
+    @property
+    def finished(self) -> bool:
+        return self.step >= self.config.steps or self.stopped is not None
 
     def config_dict(self, finished: bool) -> dict:
         return {
@@ -172,6 +187,9 @@ class Run:
             "finished": finished,
             "loss": None if math.isnan(self.loss) else self.loss,
             "elapsed_seconds": round(self.elapsed, 2),
+            "watch": None if not self.config.check_every else {
+                **self.watch.to_dict(), "stopped": self.stopped, "check_every": self.config.check_every},
+            "sampling": self.sampling,
             "updated": datetime.now(timezone.utc).isoformat(timespec="seconds"),
         }
 
@@ -205,8 +223,9 @@ def _compatible(previous: dict, run: Run) -> None:
         raise SinMDMError(f"cannot resume: the run was trained on {previous['clip']['name']} (another file)")
     if previous["codec"] != json.loads(json.dumps(run.clip.codec.to_dict())):
         raise SinMDMError("cannot resume: the clip's feature encoding options differ from the run's")
-    before = dict(previous["train"], steps=None)
-    now = dict(json.loads(json.dumps(run.config.to_dict())), steps=None)
+    # steps and early_stop are the budget, which --steps may change; fields a run predates take their defaults
+    before = dict(json.loads(json.dumps(TrainConfig.from_dict(previous["train"]).to_dict())), steps=None, early_stop=None)
+    now = dict(json.loads(json.dumps(run.config.to_dict())), steps=None, early_stop=None)
     if before != now:
         changed = sorted(k for k in before if before.get(k) != now.get(k))
         raise SinMDMError(f"cannot resume: training configuration differs from the run's ({', '.join(changed)})")
@@ -238,6 +257,7 @@ def train(
     resume: bool = False,
     codec_options: dict | None = None,
     on_progress: Callable[[int, int, float, float], None] | None = None,
+    on_check: Callable[[int, dict, int], None] | None = None,
 ) -> dict:
     """Train (or resume) a run; returns the final run config."""
     run_dir = Path(run_dir)
@@ -257,15 +277,16 @@ def train(
     check_writable_dir(run_dir)
 
     def checkpoint() -> None:
-        save_run(run_dir, run.config_dict(finished=run.step >= config.steps), run.state())
+        save_run(run_dir, run.config_dict(finished=run.finished), run.state())
 
+    watch = _quality_watch(run) if config.check_every else None
     if not has_run:
         checkpoint()
     log = open(run_dir / LOG, "a", encoding="utf-8")
     losses: list[float] = []
     started, started_step = time.perf_counter(), run.step
     try:
-        while run.step < config.steps:
+        while not run.finished:
             tick = time.perf_counter()
             losses.append(run.train_step())
             run.elapsed += time.perf_counter() - tick
@@ -279,7 +300,14 @@ def train(
                 log.flush()
                 if on_progress:
                     on_progress(run.step, config.steps, run.loss, rate)
-            if run.step % config.checkpoint_every == 0 or run.step == config.steps:
+            checked = watch is not None and (run.step % config.check_every == 0 or run.step == config.steps)
+            if checked:
+                _check(run, watch, run_dir, log, on_check)
+            if run.finished and watch is not None and run.sampling is None:
+                run.sampling = sampling_defaults(watch, _kept_weights(run, run_dir), run.device)
+                log.write(json.dumps({"step": run.step, "sampling": run.sampling}) + "\n")
+                log.flush()
+            if checked or run.step % config.checkpoint_every == 0 or run.finished:
                 checkpoint()
     except KeyboardInterrupt:
         checkpoint()
@@ -288,17 +316,73 @@ def train(
         log.close()
     if run.step == started_step:
         checkpoint()  # nothing to train (already at --steps): refresh the config's progress
-    return run.config_dict(finished=run.step >= config.steps)
+    return run.config_dict(finished=run.finished)
 
 
-def load_trained_model(run_dir: Path, use_ema: bool = True) -> tuple[torch.nn.Module, dict]:
-    """The run's denoiser (EMA weights when the run kept them) in eval mode, with its config."""
+def _quality_watch(run: Run) -> QualityWatch:
+    return QualityWatch(run.clip.bvh, run.clip.codec, run.diffusion.alphas_cumprod.numpy(), run.sampler.window,
+                        run.receptive_field, run.clip.start)
+
+
+def _check(run: Run, watch: QualityWatch, run_dir: Path, log, on_check) -> None:
+    """Score the EMA weights; keep them as best.pt when they balance best; stop when the
+    watch says the run has peaked (unless the budget was forced)."""
+    tick = time.perf_counter()
+    weights = run.ema if run.ema is not None else run.model
+    scores = watch.check(weights, run.device)
+    if run.watch.update(run.step, scores):
+        with atomic_path(run_dir / BEST) as tmp:
+            torch.save({"step": run.step, "weights": weights.state_dict(), "scores": scores}, tmp)
+    if run.config.early_stop and run.watch.should_stop(run.config.patience):
+        run.stopped = (f"balance peaked at step {run.watch.best_step} and did not improve "
+                       f"for {run.config.patience} checks")
+    run.elapsed += time.perf_counter() - tick
+    log.write(json.dumps({"step": run.step, "check": scores, "best_step": run.watch.best_step,
+                          "stopped": run.stopped}) + "\n")
+    log.flush()
+    if on_check:
+        on_check(run.step, scores, run.watch.best_step)
+
+
+def _kept_weights(run: Run, run_dir: Path) -> torch.nn.Module:
+    """The weights export will use: best.pt's when the watch kept some."""
+    model = copy.deepcopy(run.ema if run.ema is not None else run.model)
+    if (run_dir / BEST).exists():
+        model.load_state_dict(load_best(run_dir)["weights"])
+    return model
+
+
+def load_best(run_dir: Path) -> dict:
+    path = Path(run_dir) / BEST
+    try:
+        best = torch.load(path, map_location="cpu", weights_only=True)
+    except Exception as exc:  # torch raises many types for a damaged file
+        raise SinMDMError(f"{path} is corrupted or unreadable ({type(exc).__name__})") from None
+    if not isinstance(best, dict) or "weights" not in best or "step" not in best:
+        raise SinMDMError(f"{path} is incomplete")
+    return best
+
+
+CHECKPOINTS = ("best", "last")
+
+
+def load_trained_model(run_dir: Path, use_ema: bool = True, checkpoint: str = "best") -> tuple[torch.nn.Module, dict]:
+    """The run's denoiser in eval mode, with its config and which weights were taken
+    (`config["chosen"]`): `best` = the watch's best-balanced check (best.pt) when the run
+    kept one, else the last weights (EMA when the run kept them)."""
+    if checkpoint not in CHECKPOINTS:
+        raise SinMDMError(f"unknown checkpoint '{checkpoint}': use best or last")
     config = load_config(run_dir)
-    state = load_state(run_dir)
     model = Denoiser(ModelConfig.from_dict(config["model"]))
-    weights = state.get("ema") if use_ema and state.get("ema") is not None else state["model"]
+    if checkpoint == "best" and (Path(run_dir) / BEST).exists():
+        best = load_best(run_dir)
+        weights, chosen = best["weights"], {"checkpoint": "best", "step": int(best["step"]), "scores": best.get("scores")}
+    else:
+        state = load_state(run_dir)
+        weights = state.get("ema") if use_ema and state.get("ema") is not None else state["model"]
+        chosen = {"checkpoint": "last", "step": int(state["step"]), "scores": None}
     try:
         model.load_state_dict(weights)
     except RuntimeError as exc:
         raise SinMDMError(f"checkpoint of {run_dir} does not match its config ({str(exc)[:120]})") from None
-    return model.eval(), config
+    return model.eval(), {**config, "chosen": chosen}

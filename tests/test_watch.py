@@ -1,0 +1,102 @@
+"""The watched training run: the balance, the stop rule, a real run that keeps its
+best check, and an export that carries the choice to `sinmdm-run sample`."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from sinmdm.eval.metrics import harmonic_mean
+from sinmdm.train.checkpoint import load_config, read_log
+from sinmdm.train.watch import BEST, WatchState, balance, in_band
+
+from .conftest import DEMO_CLIP, run_cli
+
+# (coverage, global diversity) rows of the issue's table and the paper
+PAPER, COPYING, DRIFTING = (98.1, 1.55), (100.0, 1.01), (75.6, 1.89)
+
+
+def test_balance_ranks_the_paper_above_copying_and_drifting():
+    assert balance(*PAPER) > balance(*DRIFTING) and balance(*PAPER) > balance(*COPYING)
+    # The issue's table (coverage, global, local): the paper's harmonic mean (maxima = the
+    # 90th percentile) ranks the drifting recipe first; the balance ranks it last.
+    table = [[98.1, 1.55, 1.12], [89.6, 1.48, 1.28], [75.6, 1.89, 1.59], [84.0, 1.53, 1.32]]
+    hm = harmonic_mean(table, [True] * 3, [None] * 3)
+    assert max(range(4), key=hm.__getitem__) == 2
+    ours = [balance(c, g) for c, g, _ in table]
+    assert max(range(4), key=ours.__getitem__) == 0 and min(range(4), key=ours.__getitem__) == 2
+
+
+def scores(coverage: float, diversity: float, step_ratio: float = 1.0) -> dict:
+    return {"coverage": coverage, "global_diversity": diversity, "balance": balance(coverage, diversity),
+            "root_step_max_ratio": step_ratio}
+
+
+def test_watch_keeps_the_best_and_stops_after_patience_in_band():
+    state = WatchState()
+    assert state.update(200, scores(60, 2.0)) and state.best_step == 200
+    assert state.update(400, scores(97, 1.6)) and in_band(state.best)
+    assert not state.update(600, scores(99, 1.2))  # copying sets in
+    assert not state.update(800, scores(100, 1.4, step_ratio=3.0))  # a teleport is never kept
+    assert not state.should_stop(3)
+    assert not state.update(1000, scores(100, 1.05))
+    assert state.should_stop(3) and state.best_step == 400
+    assert WatchState.from_dict(state.to_dict()) == state
+
+
+def test_watch_does_not_stop_before_the_band():
+    state = WatchState()
+    for step, coverage in enumerate((50, 60, 55, 58, 57), start=1):
+        state.update(step * 200, scores(coverage, 2.0))
+    assert state.since_best == 3 and not state.should_stop(3)
+
+
+@pytest.fixture(scope="module")
+def watched_run(tmp_path_factory):
+    run_dir = tmp_path_factory.mktemp("watched") / "run"
+    result = run_cli("sinmdm", "train", str(DEMO_CLIP), "--out", str(run_dir), "--steps", "10", "--width", "32",
+                     "--batch", "4", "--crop", "48", "--checkpoint-every", "5", "--check-every", "5", check=True)
+    output = result.stdout + result.stderr
+    assert "check at step 5" in output and "kept step" in output
+    return run_dir
+
+
+def test_watched_run_logs_checks_and_keeps_best(watched_run):
+    checks = [r for r in read_log(watched_run) if "check" in r]
+    assert [r["step"] for r in checks] == [5, 10]
+    for record in checks:
+        assert {"coverage", "global_diversity", "local_diversity", "balance", "jitter_ratio",
+                "check_seconds"} <= set(record["check"])
+    config = load_config(watched_run)
+    assert config["finished"] and config["watch"]["checks"] == 2
+    assert config["watch"]["best_step"] in (5, 10) and (watched_run / BEST).exists()
+    assert config["sampling"]["steps"] in (20, 30, 50) and len(config["sampling"]["trials"]) == 4
+    info = json.loads(run_cli("sinmdm", "info", str(watched_run), "--json", check=True).stdout)
+    assert info["watch"]["best_step"] == config["watch"]["best_step"] and info["sampling"] == config["sampling"]
+    rich = run_cli("sinmdm", "info", str(watched_run), check=True)
+    assert "quality checks" in rich.stdout + rich.stderr
+
+
+def test_export_carries_the_choice_and_sample_uses_it(watched_run, tmp_path):
+    run_cli("sinmdm", "export", str(watched_run), "--out", str(tmp_path / "m.onnx"), check=True)
+    model_path = tmp_path / "m_w48.onnx"
+    from sinmdm.runtime import load_model
+
+    model = load_model(model_path)
+    config = load_config(watched_run)
+    provenance = model.metadata["provenance"]
+    assert provenance["checkpoint"]["checkpoint"] == "best"
+    assert provenance["checkpoint"]["step"] == config["watch"]["best_step"]
+    assert model.metadata["sampling_defaults"] == {k: config["sampling"][k] for k in ("steps", "hop")}
+    assert model.default_steps == config["sampling"]["steps"]
+    out = run_cli("sinmdm-run", "sample", str(model_path), "--frames", "96", "--out", str(tmp_path / "s"), "--json",
+                  check=True)
+    summary = json.loads(out.stdout)
+    assert summary["steps"] == config["sampling"]["steps"] and summary["hop"] == config["sampling"]["hop"]
+    forced = json.loads(run_cli("sinmdm-run", "sample", str(model_path), "--frames", "96", "--steps", "7", "--hop", "12",
+                                "--out", str(tmp_path / "f"), "--json", check=True).stdout)
+    assert forced["steps"] == 7 and forced["hop"] == 12
+    last = tmp_path / "last.onnx"
+    run_cli("sinmdm", "export", str(watched_run), "--out", str(last), "--checkpoint", "last", check=True)
+    assert load_model(tmp_path / "last_w48.onnx").metadata["provenance"]["checkpoint"]["checkpoint"] == "last"
