@@ -44,6 +44,8 @@ CONTACT_THRESHOLD = 0.5  # a label above this is "in contact"
 MIN_CONTACT_FRAMES = 2  # shorter runs are noise
 BLEND_FRAMES = 4  # frames of fade in before and out after a contact run
 SHORT_BONE = 0.5  # an end bone shorter than this share of the bone above it is a toe, not a shin
+ROOT_CORRECTION = True  # slow the root to its planted feet before the IK (plain samples only: see slow_root)
+ROOT_SMOOTHING = 9  # frames of the correction's smoothing window (0.3 s at 30 fps)
 GROW_PASSES = 2  # extra passes that pin the frames a pass slowed down (see cleanup_contacts)
 MAX_SLIDE = 0.25  # a "contact" over which the joint travels further (share of the character's size) is a label error
 _EPS = 1e-9
@@ -370,6 +372,9 @@ def cleanup_contacts(animation: Animation, codec, features: np.ndarray,
     # or not: the labels miss the ends of many contacts, and those frames slide visibly.
     slow = contact_labels(positions[:, contacts] * codec.scale, animation.fps, codec.contact_speed).astype(bool)
     inside = inside | np.stack([contact_mask(slow[:, k]) for k in range(len(contacts))], axis=1)
+    if ROOT_CORRECTION and loop_displacement is None and keep is None:
+        animation = slow_root(animation, codec, positions, inside)
+        _, positions = forward_kinematics(local, animation.translations, parents)
     shift = _cycle_shift(codec, local, animation.translations, loop_displacement)
     legs = find_legs(animation, codec, positions)
     free = [_free(codec, leg, keep) for leg in legs]
@@ -406,6 +411,40 @@ def _pin(animation: Animation, codec, legs: list[Leg], free: list, positions: np
     for leg, leg_free in zip(legs, free):
         local = _solve_leg(local, animation.translations, animation.skeleton.parents, leg, contacts, targets, leg_free)
     return local
+
+
+def slow_root(animation: Animation, codec, positions: np.ndarray, inside: np.ndarray) -> Animation:
+    """The animation with its trajectory joint moved back, frame by frame, by the mean
+    horizontal slide of the contact joints planted in both frames: a body that glides
+    over its planted feet (the commonest flaw of a drifting model) is slowed to them,
+    so the legs need far smaller IK corrections (their rotations, which the paper's
+    metrics compare with the clip's, stay near the model's)."""
+    joint = codec.trajectory_joint
+    if joint is None:
+        return animation
+    contacts = list(codec.contact_joints)
+    feet = positions[:, contacts]  # (T, C, 3)
+    both = (inside[1:] & inside[:-1]).astype(np.float64)  # (T-1, C)
+    slide = np.diff(feet, axis=0)
+    slide[..., codec.up_axis] = 0.0
+    count = both.sum(axis=1, keepdims=True)
+    step = -np.einsum("tc,tcd->td", both, slide) / np.maximum(count, 1.0)
+    # A planted joint slides at most the contact speed (beyond it the label is doubtful), and
+    # the correction is smoothed over ROOT_SMOOTHING frames: the root's speed never jumps.
+    limit = codec.contact_speed / animation.fps / codec.scale
+    norm = np.linalg.norm(step, axis=-1, keepdims=True)
+    step = step * np.minimum(1.0, limit / np.maximum(norm, _EPS))
+    kernel = np.hanning(ROOT_SMOOTHING + 2)[1:-1]
+    kernel /= kernel.sum()
+    step = np.stack([np.convolve(step[:, d], kernel, mode="same") for d in range(3)], axis=1)
+    offset = np.concatenate([np.zeros((1, 3)), np.cumsum(step, axis=0)])  # world, file units
+    parent = animation.skeleton.parents[joint]
+    if parent >= 0:  # translations live in the parent's frame
+        glob, _ = forward_kinematics(animation.rotations, animation.translations, animation.skeleton.parents)
+        offset = np.einsum("tba,tb->ta", glob[:, parent], offset)
+    translations = animation.translations.copy()
+    translations[:, joint] += offset
+    return Animation(animation.skeleton, animation.rotations, translations, animation.fps)
 
 
 def _free(codec, leg: Leg, keep: np.ndarray | None) -> np.ndarray | float:
