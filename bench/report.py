@@ -166,7 +166,54 @@ def layouts_table() -> str:
     return "\n".join(lines) + "\n"
 
 
-TABLES = {"LAYOUTS_TABLE": layouts_table, "QUALITY_TABLE": quality_table, "SPEED_TABLE": speed_table, "TRAIN_SPEED_TABLE": train_speed_table,
+PAPER_ROWS = (("paper: SinMDM, Mixamo mean (10 clips)", 94.3, 1.42, 1.00),
+              ("paper: SinMDM, Gangnam style", 98.1, 1.55, 1.12))
+
+
+def watched_table() -> str:
+    """The watched `cpu` recipe per clip beside the previous preset (quality.json) and the paper."""
+    entries = results("watched")
+    if entries is None:
+        return "(no watched results yet)\n"
+    old = {e["clip"]: e for e in (results("quality") or []) if e.get("preset") == "cpu"}
+    lines = header("clip", "recipe", "train it (kept)", "train wall", "sampler", "steps / hop", "coverage %",
+                   "global div", "local div", "foot skating cm/s (clip)", "largest root step (x clip)", "plausible")
+    for entry in entries:
+        previous = old.get(entry["clip"]) if entry.get("layout") == "as shared" and not entry.get("seed") else None
+        if previous:
+            for row in previous["rows"]:
+                if row.get("steps") == 50 and row.get("variant", "faithful") in ("faithful", None):
+                    lines.append(f"| {entry['tag']} | previous `cpu` (3000 it) | {previous['train_steps']} | "
+                                 f"{_duration(previous['train_wall_seconds'])} | faithful | 50 / 32 | {fmt(row['coverage'], 1)} | "
+                                 f"{fmt(row['global_diversity'])} | {fmt(row['local_diversity'])} | | | |")
+                    break
+        for row in entry["rows"]:
+            a = row.get("plausibility") or {}
+            lines.append(
+                f"| {entry['tag']} | watched `cpu` | {entry['train_steps']} ({entry['kept_step']}) | "
+                f"{_duration(entry['train_wall_seconds'])} | {row['variant']} | {row['steps']} / {row['hop']} | "
+                f"{fmt(row['coverage'], 1)} | {fmt(row['global_diversity'])} | {fmt(row['local_diversity'])} | "
+                f"{fmt(a.get('foot_skating_cm_s'), 1)} ({fmt(a.get('clip_foot_skating_cm_s'), 1)}) | "
+                f"{fmt(a.get('root_step_max_ratio'))} | {row['samples'] - a.get('implausible', 0)}/{row['samples']} |")
+    for name, c, g, l in PAPER_ROWS:
+        lines.append(f"| {name} | | | | | 1000 | {c} | {g} | {l} | | | |")
+    return "\n".join(lines) + "\n"
+
+
+def watched_curve_table() -> str:
+    """The quality curve of every watched run: the scores at each check."""
+    entries = results("watched")
+    if entries is None:
+        return "(no watched results yet)\n"
+    lines = header("clip", "step: coverage % / global div (balance); * = kept")
+    for entry in entries:
+        cells = [f"{c['step']}: {fmt(c['coverage'], 0)} / {fmt(c['global_diversity'])} ({fmt(c['balance'])})"
+                 + ("*" if c["step"] == entry["kept_step"] else "") for c in entry["checks"]]
+        lines.append(f"| {entry['tag']} | {'; '.join(cells)} |")
+    return "\n".join(lines) + "\n"
+
+
+TABLES = {"WATCHED_TABLE": watched_table, "WATCHED_CURVE_TABLE": watched_curve_table, "LAYOUTS_TABLE": layouts_table, "QUALITY_TABLE": quality_table, "SPEED_TABLE": speed_table, "TRAIN_SPEED_TABLE": train_speed_table,
           "STEPS_TABLE": steps_table, "RECIPE_TABLE": recipe_table, "FAST_SAMPLING_TABLE": fast_sampling_table}
 
 

@@ -89,10 +89,18 @@ def main() -> None:
                                            protocol, hop=hop, **options)
                     rows.append({"variant": f"{variant} hop {hop}", **row})
             checks = [{"step": r["step"], **r["check"]} for r in read_log(run_dir) if "check" in r]
+            stage = config.get("stage")
+            if stage:  # the second stage's checks, on the run's step axis
+                checks += [{"step": stage["from_step"] + r["step"], "stage": stage["dir"], **r["check"]}
+                           for r in read_log(run_dir / stage["dir"]) if "check" in r]
             check_seconds = sum(c["check_seconds"] for c in checks)
             results.append({
                 "tag": tag, "clip": name, "layout": layout or "as shared", "seed": seed,
-                "train_steps": config["step"], "kept_step": (config.get("watch") or {}).get("best_step"),
+                "train_steps": config["step"] + (stage["steps"] if stage else 0),
+                "kept_step": (stage["from_step"] + json.loads((run_dir / stage["dir"] / "config.json").read_text())
+                              ["watch"]["best_step"]) if stage and stage["chosen"]
+                else (config.get("watch") or {}).get("best_step"),
+                "stage": stage, "sampling_chosen": model.metadata.get("sampling_defaults"),
                 "stopped": (config.get("watch") or {}).get("stopped"),
                 "train_seconds": config["elapsed_seconds"], "train_wall_seconds": round(train_wall, 1),
                 "check_seconds": round(check_seconds, 1), "sampling": config.get("sampling"),

@@ -261,6 +261,19 @@ def test_glb_passes_khronos_validator(tmp_path, demo):
 # --------------------------------------------------------------------------- CLI and the optional extra
 
 
+def test_gif_of_a_large_crowd(tmp_path, demo):
+    """16 clips (more than the palette held one ramp each for, issue 15): the GIF is written."""
+    pytest.importorskip("matplotlib")
+    from PIL import Image
+
+    from sinmdm.preview.render import render_preview
+
+    clips = [first_frames(demo, 4, start=10 * k) for k in range(16)]
+    render_preview(clips, tmp_path / "crowd.gif")
+    with Image.open(tmp_path / "crowd.gif") as gif:
+        assert gif.n_frames == 4
+
+
 def test_cli_preview_writes_and_refuses_to_overwrite(tmp_path):
     pytest.importorskip("matplotlib")
     out = tmp_path / "x.gif"

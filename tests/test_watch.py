@@ -9,7 +9,7 @@ import pytest
 
 from sinmdm.eval.metrics import harmonic_mean
 from sinmdm.train.checkpoint import load_config, read_log
-from sinmdm.train.watch import BEST, WatchState, balance, in_band
+from sinmdm.train.watch import BEST, COPYING, PEAKED, WatchState, balance, in_band
 
 from .conftest import DEMO_CLIP, run_cli
 
@@ -39,9 +39,9 @@ def test_watch_keeps_the_best_and_stops_after_patience_in_band():
     assert state.update(400, scores(97, 1.6)) and in_band(state.best)
     assert not state.update(600, scores(99, 1.2))  # copying sets in
     assert not state.update(800, scores(100, 1.4, step_ratio=3.0))  # a teleport is never kept
-    assert not state.should_stop(3)
+    assert state.should_stop(3, scores(100, 1.4)) is None
     assert not state.update(1000, scores(100, 1.05))
-    assert state.should_stop(3) and state.best_step == 400
+    assert state.should_stop(3, scores(100, 1.05)) == PEAKED and state.best_step == 400
     assert WatchState.from_dict(state.to_dict()) == state
 
 
@@ -49,7 +49,16 @@ def test_watch_does_not_stop_before_the_band():
     state = WatchState()
     for step, coverage in enumerate((50, 60, 55, 58, 57), start=1):
         state.update(step * 200, scores(coverage, 2.0))
-    assert state.since_best == 3 and not state.should_stop(3)
+    assert state.since_best == 3 and state.should_stop(3, scores(57, 2.0)) is None
+
+
+def test_watch_stops_a_copying_run_short_of_the_band():
+    """The walk's curve: coverage reaches the band while diversity falls below it."""
+    state = WatchState()
+    for step, (coverage, diversity) in enumerate(((50, 1.51), (74, 1.47), (91, 1.17), (96, 1.15), (98, 1.1),
+                                                   (99, 1.05)), start=1):
+        state.update(step * 200, scores(coverage, diversity))
+    assert state.best_step == 600 and state.should_stop(3, scores(99, 1.05)) == COPYING
 
 
 @pytest.fixture(scope="module")

@@ -105,6 +105,11 @@ def train(
     if result.get("sampling"):
         sampling = result["sampling"]
         console.print(f"sampling defaults measured on it: {sampling['steps']} steps, hop {sampling['hop']}")
+    stage = result.get("stage")
+    if stage:
+        console.print(f"second stage ({stage['dir']}, --norm {stage['norm']}, {stage['steps']} steps from step "
+                      f"{stage['from_step']}): " + (_scores_line(stage["best"]) if stage.get("best") else "no check kept")
+                      + ("  [bold]chosen[/bold]" if stage["chosen"] else "  (the first stage is kept)"))
 
 
 def _scores_line(scores: dict) -> str:
@@ -149,6 +154,7 @@ def info(
         "model": config["model"],
         "watch": config.get("watch"),
         "sampling": config.get("sampling"),
+        "stage": config.get("stage"),
     }
     if as_json:
         print_json(summary)
@@ -166,6 +172,10 @@ def info(
         if watch.get("stopped"):
             console.print(f"stopped early: {watch['stopped']}")
         _print_checks(run_dir)
+    stage = config.get("stage")
+    if stage:
+        console.print(f"second stage {stage['dir']} (--norm {stage['norm']}, from step {stage['from_step']}): "
+                      + ("chosen" if stage["chosen"] else "not chosen") + f"; `sinmdm info {run_dir / stage['dir']}`")
     if config.get("sampling"):
         sampling = config["sampling"]
         console.print(f"sampling defaults: {sampling['steps']} steps, hop {sampling['hop']} "

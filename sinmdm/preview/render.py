@@ -285,6 +285,8 @@ def _ramp_palette(background: str, inks: Sequence[str], levels: int = 16):
     image_module = import_extra("PIL.Image")
     bg = hex_rgb(background)
     colours = [bg]
+    inks = list(dict.fromkeys(inks))  # a crowd reuses the clip colours: one ramp per colour
+    levels = max(2, min(levels, 1 + 255 // max(len(inks), 1)))  # a GIF palette holds 256 colours
     for ink in inks:
         rgb = hex_rgb(ink)
         colours += [bg + (rgb - bg) * (k / (levels - 1)) for k in range(1, levels)]

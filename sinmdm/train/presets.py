@@ -31,6 +31,7 @@ class TrainConfig:
     check_every: int | None = None
     patience: int = 3
     early_stop: bool = True
+    fallback_norm: str | None = None  # a run that stops COPYING spends its remaining steps on this norm
 
     def to_dict(self) -> dict:
         data = asdict(self)
@@ -53,7 +54,7 @@ PRESETS = {
     "paper": TrainConfig(preset="paper", steps=60_000),
     "cpu": TrainConfig(
         preset="cpu",
-        steps=3_000,
+        steps=2_800,
         crop=64,
         rescale=None,
         lr=2e-4,
@@ -61,6 +62,7 @@ PRESETS = {
         ema=0.999,
         bf16=True,
         check_every=200,
+        fallback_norm="frame",
     ),
 }
 

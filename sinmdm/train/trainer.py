@@ -6,7 +6,7 @@ import copy
 import json
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import Callable
@@ -25,7 +25,7 @@ from .data import BatchSampler
 from .diffusion import GaussianDiffusion
 from .model import Denoiser, ModelConfig, count_parameters, receptive_field
 from .presets import TrainConfig
-from .watch import BEST, QualityWatch, WatchState, sampling_defaults
+from .watch import BEST, COPYING, PEAKED, QualityWatch, WatchState, sampling_defaults
 
 
 def resolve_device(name: str = "auto") -> torch.device:
@@ -316,12 +316,49 @@ def train(
         log.close()
     if run.step == started_step:
         checkpoint()  # nothing to train (already at --steps): refresh the config's progress
-    return run.config_dict(finished=run.finished)
+    result = run.config_dict(finished=run.finished)
+    second = _second_stage(run)
+    if second is None:
+        return result
+    stage_dir = run_dir / f"{STAGE_PREFIX}{second.norm}"
+    offset = run.step
+
+    def stage_progress(step: int, total: int, loss: float, rate: float) -> None:
+        if on_progress:
+            on_progress(offset + step, config.steps, loss, rate)
+
+    def stage_check(step: int, scores: dict, best_step: int) -> None:
+        if on_check:
+            on_check(offset + step, scores, offset + best_step)
+
+    stage = train(clip_path, stage_dir, second, seed=seed, device=device, resume=(stage_dir / CONFIG).exists(),
+                  codec_options=codec_options, on_progress=stage_progress, on_check=stage_check)
+    first_best, stage_best = (run.watch.best or {}).get("balance", -1.0), (stage["watch"]["best"] or {}).get("balance", -1.0)
+    result["stage"] = {"dir": stage_dir.name, "norm": second.norm, "steps": stage["step"], "from_step": offset,
+                       "best": stage["watch"]["best"], "chosen": stage_best > first_best}
+    write_text_atomic(run_dir / CONFIG, json.dumps(result, indent=2) + "\n")
+    return result
+
+
+STAGE_PREFIX = "norm-"  # the folder of a run's second stage, inside the run
+
+
+def _second_stage(run: Run) -> TrainConfig | None:
+    """A copying run short of the band spends the rest of its budget on the other
+    normalisation (`fallback_norm`, a strictly local model that copies less:
+    BENCHMARKS.md); None when there is nothing to try."""
+    config = run.config
+    if not (run.stopped or "").startswith(COPYING) or not config.fallback_norm or config.fallback_norm == config.norm:
+        return None
+    remaining = config.steps - run.step
+    if remaining < 2 * (config.check_every or 1):
+        return None
+    return replace(config, norm=config.fallback_norm, steps=remaining, fallback_norm=None)
 
 
 def _quality_watch(run: Run) -> QualityWatch:
     return QualityWatch(run.clip.bvh, run.clip.codec, run.diffusion.alphas_cumprod.numpy(), run.sampler.window,
-                        run.receptive_field, run.clip.start)
+                        run.receptive_field, run.clip.start, source_fps=run.clip.info["source_fps"])
 
 
 def _check(run: Run, watch: QualityWatch, run_dir: Path, log, on_check) -> None:
@@ -333,9 +370,12 @@ def _check(run: Run, watch: QualityWatch, run_dir: Path, log, on_check) -> None:
     if run.watch.update(run.step, scores):
         with atomic_path(run_dir / BEST) as tmp:
             torch.save({"step": run.step, "weights": weights.state_dict(), "scores": scores}, tmp)
-    if run.config.early_stop and run.watch.should_stop(run.config.patience):
-        run.stopped = (f"balance peaked at step {run.watch.best_step} and did not improve "
-                       f"for {run.config.patience} checks")
+    reason = run.watch.should_stop(run.config.patience, scores) if run.config.early_stop else None
+    if reason == PEAKED:
+        run.stopped = f"{PEAKED}: the balance peaked in the band at step {run.watch.best_step}"
+    elif reason == COPYING:
+        run.stopped = (f"{COPYING}: coverage {scores['coverage']:.0f} % while global diversity fell to "
+                       f"{scores['global_diversity']:.2f} (best balance at step {run.watch.best_step})")
     run.elapsed += time.perf_counter() - tick
     log.write(json.dumps({"step": run.step, "check": scores, "best_step": run.watch.best_step,
                           "stopped": run.stopped}) + "\n")
@@ -373,6 +413,12 @@ def load_trained_model(run_dir: Path, use_ema: bool = True, checkpoint: str = "b
     if checkpoint not in CHECKPOINTS:
         raise SinMDMError(f"unknown checkpoint '{checkpoint}': use best or last")
     config = load_config(run_dir)
+    stage = config.get("stage")
+    if checkpoint == "best" and stage and stage.get("chosen"):
+        model, inner = load_trained_model(Path(run_dir) / stage["dir"], use_ema, checkpoint)
+        return model, {**config, "model": inner["model"], "window": inner["window"],
+                       "receptive_field": inner["receptive_field"], "sampling": inner.get("sampling"),
+                       "chosen": {**inner["chosen"], "stage": stage["dir"]}}
     model = Denoiser(ModelConfig.from_dict(config["model"]))
     if checkpoint == "best" and (Path(run_dir) / BEST).exists():
         best = load_best(run_dir)

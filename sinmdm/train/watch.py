@@ -34,6 +34,7 @@ from ..runtime.errors import SinMDMError
 from ..runtime.generate import GenerationRequest, generate
 from ..runtime.model import MotionModel
 
+PEAKED, COPYING = "peaked", "copying"  # why a watched run stopped early
 BEST = "best.pt"  # the best-balanced check's weights, beside checkpoint.pt
 COVERAGE_BAND = 95.0  # % : below this the model drifts from the clip
 DIVERSITY_BAND = 1.3  # global diversity: below this the model copies
@@ -87,7 +88,10 @@ class QualityWatch:
     """Scores a run's current weights against its clip."""
 
     def __init__(self, reference: BVH, codec, alphas_cumprod: np.ndarray, window: int, receptive_field: int,
-                 start: np.ndarray, settings: CheckSettings = CheckSettings(), frames: int | None = None):
+                 start: np.ndarray, settings: CheckSettings = CheckSettings(), frames: int | None = None,
+                 source_fps: float | None = None):
+        if source_fps:  # the clip's real frame rate (--source-fps) for every metric
+            reference = BVH(reference.skeleton, 1.0 / source_fps, reference.values, reference.path)
         self.reference, self.settings = reference, settings
         self.codec, self.alphas, self.window, self.receptive_field, self.start = (
             codec, np.asarray(alphas_cumprod, dtype=np.float64), window, receptive_field, start)
@@ -157,9 +161,19 @@ class WatchState:
         self.since_best += 1
         return False
 
-    def should_stop(self, patience: int) -> bool:
-        """The band was reached and `patience` checks have not improved on it."""
-        return self.best is not None and in_band(self.best) and self.since_best >= patience
+    def should_stop(self, patience: int, latest: dict) -> str | None:
+        """Why training should end now (None: go on). After `patience` checks without
+        improvement: PEAKED when the best is in the band; COPYING when the model already
+        covers the clip (coverage in band) but its diversity keeps falling below the band:
+        more steps only copy more (a walk under GroupNorm, BENCHMARKS.md). A model still
+        short of the clip's coverage trains on."""
+        if self.best is None or self.since_best < patience:
+            return None
+        if in_band(self.best):
+            return PEAKED
+        if latest["coverage"] >= COVERAGE_BAND:
+            return COPYING
+        return None
 
     def to_dict(self) -> dict:
         return asdict(self)
