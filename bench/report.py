@@ -166,8 +166,8 @@ def layouts_table() -> str:
     return "\n".join(lines) + "\n"
 
 
-PAPER_ROWS = (("paper: SinMDM, Mixamo mean (10 clips)", 94.3, 1.42, 1.00),
-              ("paper: SinMDM, Gangnam style", 98.1, 1.55, 1.12))
+PAPER_BAND_ROWS = (("paper: SinMDM, Mixamo mean (10 clips)", 94.3, 1.42, 1.00),
+                   ("paper: SinMDM, Gangnam style", 98.1, 1.55, 1.12))
 
 
 def watched_table() -> str:
@@ -195,8 +195,8 @@ def watched_table() -> str:
                 f"{fmt(row['coverage'], 1)} | {fmt(row['global_diversity'])} | {fmt(row['local_diversity'])} | "
                 f"{fmt(a.get('foot_skating_cm_s'), 1)} ({fmt(a.get('clip_foot_skating_cm_s'), 1)}) | "
                 f"{fmt(a.get('root_step_max_ratio'))} | {row['samples'] - a.get('implausible', 0)}/{row['samples']} |")
-    for name, c, g, l in PAPER_ROWS:
-        lines.append(f"| {name} | | | | | 1000 | {c} | {g} | {l} | | | |")
+    for name, c, g, l in PAPER_BAND_ROWS:
+        lines.append(f"| {name} | | | | | 1000 | {c:.1f} | {g:.2f} | {l:.2f} | | | |")
     return "\n".join(lines) + "\n"
 
 
@@ -207,9 +207,14 @@ def watched_curve_table() -> str:
         return "(no watched results yet)\n"
     lines = header("clip", "step: coverage % / global div (balance); * = kept")
     for entry in entries:
-        cells = [f"{c['step']}: {fmt(c['coverage'], 0)} / {fmt(c['global_diversity'])} ({fmt(c['balance'])})"
-                 + ("*" if c["step"] == entry["kept_step"] else "") for c in entry["checks"]]
-        lines.append(f"| {entry['tag']} | {'; '.join(cells)} |")
+        cells, stage = [], None
+        for c in entry["checks"]:
+            if c.get("stage") != stage:  # the second stage starts: mark it
+                stage = c.get("stage")
+                cells.append(f"**then {stage}:**")
+            cells.append(f"{c['step']}: {fmt(c['coverage'], 0)} / {fmt(c['global_diversity'])} ({fmt(c['balance'])})"
+                         + ("*" if c["step"] == entry["kept_step"] else ""))
+        lines.append(f"| {entry['tag']} | {'; '.join(cells).replace(':**;', ':**')} |")
     return "\n".join(lines) + "\n"
 
 

@@ -102,3 +102,11 @@ def test_import_runtime_loads_no_torch():
 
     code = "import sys, sinmdm.runtime, sinmdm.runtime.features, sinmdm.runtime.bvh, sinmdm.cli.run; assert 'torch' not in sys.modules"
     subprocess.run([sys.executable, "-c", code], check=True)
+
+
+def test_version():
+    from sinmdm import __version__
+
+    for command in ("sinmdm-run", "sinmdm"):
+        result = run_cli(command, "--version", check=True)
+        assert result.stdout.strip() == f"{command} {__version__}"

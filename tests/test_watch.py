@@ -14,11 +14,11 @@ from sinmdm.train.watch import BEST, COPYING, PEAKED, WatchState, balance, in_ba
 from .conftest import DEMO_CLIP, run_cli
 
 # (coverage, global diversity) rows of the issue's table and the paper
-PAPER, COPYING, DRIFTING = (98.1, 1.55), (100.0, 1.01), (75.6, 1.89)
+PAPER_ROW, COPYING_ROW, DRIFTING_ROW = (98.1, 1.55), (100.0, 1.01), (75.6, 1.89)
 
 
 def test_balance_ranks_the_paper_above_copying_and_drifting():
-    assert balance(*PAPER) > balance(*DRIFTING) and balance(*PAPER) > balance(*COPYING)
+    assert balance(*PAPER_ROW) > balance(*DRIFTING_ROW) and balance(*PAPER_ROW) > balance(*COPYING_ROW)
     # The issue's table (coverage, global, local): the paper's harmonic mean (maxima = the
     # 90th percentile) ranks the drifting recipe first; the balance ranks it last.
     table = [[98.1, 1.55, 1.12], [89.6, 1.48, 1.28], [75.6, 1.89, 1.59], [84.0, 1.53, 1.32]]
@@ -109,3 +109,38 @@ def test_export_carries_the_choice_and_sample_uses_it(watched_run, tmp_path):
     last = tmp_path / "last.onnx"
     run_cli("sinmdm", "export", str(watched_run), "--out", str(last), "--checkpoint", "last", check=True)
     assert load_model(tmp_path / "last_w48.onnx").metadata["provenance"]["checkpoint"]["checkpoint"] == "last"
+
+
+def test_second_stage_only_for_a_copying_run_with_budget_left():
+    from types import SimpleNamespace
+
+    from sinmdm.train.presets import preset
+    from sinmdm.train.trainer import _second_stage
+
+    config = preset("cpu")
+    copying = SimpleNamespace(config=config, stopped=f"{COPYING}: ...", step=1200)
+    second = _second_stage(copying)
+    assert second.norm == "frame" and second.steps == config.steps - 1200 and second.fallback_norm is None
+    assert _second_stage(SimpleNamespace(config=config, stopped=f"{PEAKED}: ...", step=1200)) is None
+    assert _second_stage(SimpleNamespace(config=config, stopped=None, step=config.steps)) is None
+    assert _second_stage(SimpleNamespace(config=config, stopped=f"{COPYING}: ...", step=config.steps - 100)) is None
+    assert _second_stage(SimpleNamespace(config=second, stopped=f"{COPYING}: ...", step=100)) is None
+
+
+def test_export_follows_a_chosen_second_stage(watched_run, tiny_run, tmp_path):
+    """A run whose second stage was chosen exports the stage's weights and model config."""
+    import shutil
+
+    from sinmdm.runtime import load_model
+
+    run_dir = tmp_path / "run"
+    shutil.copytree(watched_run, run_dir)
+    shutil.copytree(tiny_run, run_dir / "norm-frame")
+    config = json.loads((run_dir / "config.json").read_text())
+    config["stage"] = {"dir": "norm-frame", "norm": "frame", "steps": 10, "from_step": 10, "best": None, "chosen": True}
+    (run_dir / "config.json").write_text(json.dumps(config))
+    run_cli("sinmdm", "export", str(run_dir), "--out", str(tmp_path / "s.onnx"), check=True)
+    run_cli("sinmdm", "export", str(tiny_run), "--out", str(tmp_path / "t.onnx"), check=True)
+    staged, tiny = load_model(tmp_path / "s_w48.onnx"), load_model(tmp_path / "t_w48.onnx")
+    assert staged.metadata["model_id"] == tiny.metadata["model_id"]
+    assert staged.metadata["provenance"]["checkpoint"]["stage"] == "norm-frame"

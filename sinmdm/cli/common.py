@@ -35,6 +35,11 @@ def run_app(app: typer.Typer) -> Callable[[], None]:
     """Wrap a typer app so user errors become one line on stderr and exit status 2."""
 
     def main() -> None:
+        if sys.argv[1:] == ["--version"]:
+            from .. import __version__
+
+            sys.stdout.write(f"{app.info.name} {__version__}\n")
+            return
         try:
             app(prog_name=app.info.name)
         except SinMDMError as exc:
