@@ -167,15 +167,22 @@ def info(
     table.add_row("clip", f"{config['clip']['name']} ({config['clip']['frames']} frames, sha256 {config['clip']['sha256'][:12]})")
     console.print(table)
     watch = config.get("watch") or {}
+    stage = config.get("stage")
     if watch.get("best"):
-        console.print(f"kept: step {watch['best_step']} of {watch['checks']} checks, {_scores_line(watch['best'])}")
+        first = "first stage's best" if stage and stage["chosen"] else "kept"
+        console.print(f"{first}: step {watch['best_step']} of {watch['checks']} checks, {_scores_line(watch['best'])}")
         if watch.get("stopped"):
             console.print(f"stopped early: {watch['stopped']}")
         _print_checks(run_dir)
-    stage = config.get("stage")
     if stage:
-        console.print(f"second stage {stage['dir']} (--norm {stage['norm']}, from step {stage['from_step']}): "
-                      + ("chosen" if stage["chosen"] else "not chosen") + f"; `sinmdm info {run_dir / stage['dir']}`")
+        inner = load_config(Path(run_dir) / stage["dir"])
+        best = (inner.get("watch") or {}).get("best")
+        console.print(f"second stage {stage['dir']} (--norm {stage['norm']}, steps {stage['from_step']}-"
+                      f"{stage['from_step'] + inner['step']}): " + ("[bold]kept[/bold]" if stage["chosen"] else "not kept")
+                      + (f", its best at run step {stage['from_step'] + inner['watch']['best_step']}: {_scores_line(best)}"
+                         if best else "") + f" (details: sinmdm info {Path(run_dir) / stage['dir']})")
+        if stage["chosen"] and inner.get("sampling"):
+            config = {**config, "sampling": inner["sampling"]}
     if config.get("sampling"):
         sampling = config["sampling"]
         console.print(f"sampling defaults: {sampling['steps']} steps, hop {sampling['hop']} "
