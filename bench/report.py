@@ -166,10 +166,6 @@ def layouts_table() -> str:
     return "\n".join(lines) + "\n"
 
 
-PAPER_BAND_ROWS = (("paper: SinMDM, Mixamo mean (10 clips)", 94.3, 1.42, 1.00),
-                   ("paper: SinMDM, Gangnam style", 98.1, 1.55, 1.12))
-
-
 def watched_table() -> str:
     """The watched `cpu` recipe per clip beside the previous preset (quality.json) and the paper."""
     entries = results("watched")
@@ -195,8 +191,9 @@ def watched_table() -> str:
                 f"{fmt(row['coverage'], 1)} | {fmt(row['global_diversity'])} | {fmt(row['local_diversity'])} | "
                 f"{fmt(a.get('foot_skating_cm_s'), 1)} ({fmt(a.get('clip_foot_skating_cm_s'), 1)}) | "
                 f"{fmt(a.get('root_step_max_ratio'))} | {row['samples'] - a.get('implausible', 0)}/{row['samples']} |")
-    for name, c, g, l in PAPER_BAND_ROWS:
-        lines.append(f"| {name} | | | | | 1000 | {c:.1f} | {g:.2f} | {l:.2f} | | | |")
+    for name, steps, _, c, g, l, _, _ in PAPER_ROWS:
+        if name.startswith("paper: SinMDM"):
+            lines.append(f"| {name} | | | | | {steps} | {fmt(c, 1)} | {fmt(g)} | {fmt(l)} | | | |")
     return "\n".join(lines) + "\n"
 
 

@@ -60,7 +60,7 @@ def train(
 
     from ..train.model import NORM_KINDS
     from ..train.presets import preset as get_preset
-    from ..train.trainer import train as run_training
+    from ..train.trainer import kept_sampling, train as run_training
 
     if norm is not None and norm not in NORM_KINDS:
         raise SinMDMError(f"--norm must be {' or '.join(NORM_KINDS)}, got '{norm}'")
@@ -102,14 +102,14 @@ def train(
     if watch and watch.get("best"):
         console.print(f"kept step {watch['best_step']} (best balance): {_scores_line(watch['best'])}"
                       + (f"; stopped early: {watch['stopped']}" if watch.get("stopped") else ""))
-    if result.get("sampling"):
-        sampling = result["sampling"]
-        console.print(f"sampling defaults measured on it: {sampling['steps']} steps, hop {sampling['hop']}")
     stage = result.get("stage")
     if stage:
         console.print(f"second stage ({stage['dir']}, --norm {stage['norm']}, {stage['steps']} steps from step "
                       f"{stage['from_step']}): " + (_scores_line(stage["best"]) if stage.get("best") else "no check kept")
                       + ("  [bold]chosen[/bold]" if stage["chosen"] else "  (the first stage is kept)"))
+    sampling = kept_sampling(out, result)
+    if sampling:
+        console.print(f"sampling defaults measured on the kept weights: {sampling['steps']} steps, hop {sampling['hop']}")
 
 
 def _scores_line(scores: dict) -> str:
@@ -135,6 +135,7 @@ def info(
 ) -> None:
     """Show a run's configuration, parameter count and progress."""
     from ..train.checkpoint import load_config
+    from ..train.trainer import kept_sampling
 
     config = load_config(run_dir)
     summary = {
@@ -153,7 +154,7 @@ def info(
         "train": config["train"],
         "model": config["model"],
         "watch": config.get("watch"),
-        "sampling": config.get("sampling"),
+        "sampling": kept_sampling(run_dir, config),  # what export writes into the model
         "stage": config.get("stage"),
     }
     if as_json:
@@ -181,10 +182,8 @@ def info(
                       f"{stage['from_step'] + inner['step']}): " + ("[bold]kept[/bold]" if stage["chosen"] else "not kept")
                       + (f", its best at run step {stage['from_step'] + inner['watch']['best_step']}: {_scores_line(best)}"
                          if best else "") + f" (details: sinmdm info {Path(run_dir) / stage['dir']})")
-        if stage["chosen"] and inner.get("sampling"):
-            config = {**config, "sampling": inner["sampling"]}
-    if config.get("sampling"):
-        sampling = config["sampling"]
+    sampling = summary["sampling"]
+    if sampling:
         console.print(f"sampling defaults: {sampling['steps']} steps, hop {sampling['hop']} "
                       f"(coverage {sampling['scores']['coverage']:.1f} %, global {sampling['scores']['global_diversity']:.2f})")
 

@@ -343,6 +343,18 @@ def train(
 STAGE_PREFIX = "norm-"  # the folder of a run's second stage, inside the run
 
 
+def kept_stage(run_dir: Path, config: dict) -> dict | None:
+    """The config of the run's second stage when the watch kept it over the first, else None."""
+    stage = config.get("stage")
+    return load_config(Path(run_dir) / stage["dir"]) if stage and stage.get("chosen") else None
+
+
+def kept_sampling(run_dir: Path, config: dict) -> dict | None:
+    """The sampling defaults measured on the weights export takes (the kept stage's)."""
+    kept = kept_stage(run_dir, config)
+    return (kept if kept is not None else config).get("sampling")
+
+
 def _second_stage(run: Run) -> TrainConfig | None:
     """A copying run short of the band spends the rest of its budget on the other
     normalisation (`fallback_norm`, a strictly local model that copies less:
