@@ -30,7 +30,8 @@ Cleanup = typer.Option(True, "--cleanup/--no-cleanup", help="Pin the feet where 
 def _run(command: str, models, ref: Path, ref_fps, count, seed, sampler, steps, out, force, as_json, preview,
          make_plan, cleanup: bool = True) -> None:
     from ..runtime.applications import load_reference, run_plan
-    from ..runtime.generate import GenerationRequest, write_outputs
+    from ..runtime.generate import GenerationRequest
+    from ..runtime.outputs import write_outputs
     from ..runtime.model import load_model
 
     model = load_model(models or None)

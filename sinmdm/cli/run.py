@@ -197,7 +197,8 @@ def sample(
     as_json: bool = typer.Option(False, "--json", help="Print a JSON summary on stdout."),
 ) -> None:
     """Generate new motions from a trained model and write them as BVH."""
-    from ..runtime.generate import GenerationRequest, generate, write_outputs
+    from ..runtime.generate import GenerationRequest, generate
+    from ..runtime.outputs import write_outputs
     from ..runtime.model import load_model
 
     model = load_model(models or None, threads=threads)

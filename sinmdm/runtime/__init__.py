@@ -6,7 +6,8 @@
 from .bvh import BVH, Skeleton, read_bvh, write_bvh
 from .errors import BVHError, ModelError, SinMDMError
 from .features import FeatureLayout, MotionCodec, build_codec
-from .generate import GenerationRequest, GenerationResult, generate, write_outputs
+from .generate import GenerationRequest, GenerationResult, generate
+from .outputs import write_outputs
 from .model import MotionModel, load_model
 from .sampler import Guide, sample_features
 

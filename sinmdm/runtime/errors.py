@@ -20,3 +20,13 @@ class BVHError(SinMDMError):
 
 class ModelError(SinMDMError):
     """A model file that is damaged, foreign, or from another version or skeleton."""
+
+
+class OptionError(SinMDMError):
+    """A bad value for a named option. `option` is the API's name (e.g. "source_fps");
+    the CLI renders it as its flag (--source-fps)."""
+
+    def __init__(self, option: str, message: str):
+        self.option = option
+        self.message = message
+        super().__init__(f"{option}: {message}")
