@@ -23,7 +23,7 @@ import numpy as np
 
 from sinmdm.eval import metrics
 from sinmdm.eval.motion_features import eval_features, evaluate_files, protocol_for
-from sinmdm.runtime import GenerationRequest, generate, load_model, read_bvh, write_outputs
+from sinmdm.runtime import SamplingOptions, generate, load_model, read_bvh, write_outputs
 from sinmdm.runtime.animation import animation_from_bvh, global_positions
 from sinmdm.runtime.model import DEMO_MODEL
 
@@ -45,7 +45,7 @@ def contact_split(clip: Path, samples: list, protocol: str) -> dict:
 
 
 def measure(model, clip: Path, frames: int, count: int, seed: int, cleanup: bool, protocol: str) -> tuple[dict, list]:
-    result = generate(model, GenerationRequest(frames=frames, count=count, seed=seed, cleanup=cleanup))
+    result = generate(model, frames, SamplingOptions(count=count, seed=seed, cleanup=cleanup))
     with tempfile.TemporaryDirectory() as tmp:
         paths = write_outputs(model, result, Path(tmp), force=True)
         scores = evaluate_files(clip, paths, preset=protocol)

@@ -12,7 +12,7 @@ import statistics
 import time
 from pathlib import Path
 
-from sinmdm.runtime import GenerationRequest, generate, load_model
+from sinmdm.runtime import SamplingOptions, generate, load_model
 
 VARIANTS = {"default (50 steps, hop 32)": dict(steps=50), "fast (20 steps, hop 48)": dict(steps=20, hop=48)}
 
@@ -25,12 +25,12 @@ def main() -> None:
     parser.add_argument("--results", type=Path, default=Path(__file__).resolve().parent / "results" / "fast_speed.json")
     args = parser.parse_args()
     model = load_model(args.model)
-    generate(model, GenerationRequest(frames=args.frames, steps=2))  # warm-up
+    generate(model, args.frames, SamplingOptions(steps=2))  # warm-up
     times: dict[str, list[float]] = {name: [] for name in VARIANTS}
     for seed in range(args.repeats):
         for name, options in VARIANTS.items():
             began = time.perf_counter()
-            generate(model, GenerationRequest(frames=args.frames, seed=seed, **options))
+            generate(model, args.frames, SamplingOptions(seed=seed, **options))
             times[name].append(time.perf_counter() - began)
     medians = {name: statistics.median(values) for name, values in times.items()}
     first, second = medians.values()

@@ -119,9 +119,9 @@ def main() -> None:
 
 
 def sample(model, frames: int, count: int, seed: int, options: dict, folder: Path) -> None:
-    from sinmdm.runtime import GenerationRequest, generate, write_outputs
+    from sinmdm.runtime import SamplingOptions, generate, write_outputs
 
-    result = generate(model, GenerationRequest(frames=frames, count=count, seed=seed, **options))
+    result = generate(model, frames, SamplingOptions(count=count, seed=seed, **options))
     write_outputs(model, result, folder, force=True)
 
 

@@ -25,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-from sinmdm.runtime import GenerationRequest, generate, load_model, read_bvh
+from sinmdm.runtime import SamplingOptions, generate, load_model, read_bvh
 from sinmdm.runtime.animation import Animation, animation_from_bvh, global_positions
 from sinmdm.runtime.model import DEMO_MODEL
 from sinmdm.runtime.sampler import cycle_displacement
@@ -81,8 +81,7 @@ def measure(model, clip, samples: int = 8, frames: int | None = None, seed: int 
     report = {"frames": frames, "samples": samples, "seed": seed, "steps": steps, "units": "file units", **extra,
               "metres_per_unit": model.codec.scale, "clip_median": reference}
     for name, loop in (("loop", True), ("no_loop", False)):
-        result = generate(model, GenerationRequest(frames=frames, count=samples, seed=seed, steps=steps, hop=hop, loop=loop,
-                                                    **extra))
+        result = generate(model, frames, SamplingOptions(count=samples, seed=seed, steps=steps, hop=hop, **extra), loop=loop)
         shifts = cycle_displacement(model.codec, result.features)
         rows = [seam(model.codec, c, d) for c, d in zip(result.clips, shifts)]
         steps_, seconds = np.array([r["step"] for r in rows]), np.array([r["second"] for r in rows])

@@ -41,18 +41,17 @@ def export_trained_window(run_dir: Path, window: int) -> Path:
 
 def sample_and_score(model: Path, clip: Path, out: Path, steps: int, count: int, preset: str,
                      hop: int | None = None, sampler: str = "ddpm", **options) -> dict:
-    """Sample `count` motions (seeds 0..count-1; `options`: more GenerationRequest fields,
+    """Sample `count` motions (seeds 0..count-1; `options`: more SamplingOptions fields,
     e.g. margin=0, cleanup=False for the paper's sampler) and score them: the paper's
     metrics and the plausibility aggregate."""
     from sinmdm.eval.motion_features import evaluate_files
-    from sinmdm.runtime import GenerationRequest, generate, load_model, read_bvh, write_outputs
+    from sinmdm.runtime import SamplingOptions, generate, load_model, read_bvh, write_outputs
 
     loaded = load_model(model)
     reference = read_bvh(clip)
     frames = 2 * round(reference.frames / reference.fps * loaded.codec.fps)
     began = time.perf_counter()
-    result = generate(loaded, GenerationRequest(frames=frames, count=count, seed=0, steps=steps,
-                                                hop=hop, sampler=sampler, **options))
+    result = generate(loaded, frames, SamplingOptions(count=count, seed=0, steps=steps, hop=hop, sampler=sampler, **options))
     seconds = time.perf_counter() - began
     paths = write_outputs(loaded, result, out, force=True)
     scores = evaluate_files(clip, paths, preset=preset)

@@ -76,6 +76,7 @@ def main() -> None:
     args = parser.parse_args()
 
     from sinmdm.runtime import load_model
+    from sinmdm.runtime.options import SamplingOptions
     from sinmdm.runtime.sampler import sample_features
 
     model = load_model(args.model, threads=args.threads)
@@ -87,19 +88,19 @@ def main() -> None:
 
     for steps in ([20, 50, 100] if args.skip_1000 else [20, 50, 100, 1000]):
         repeat = 1 if steps == 1000 else args.repeat
-        seconds = median_seconds(lambda: sample_features(model, 300, steps=steps), repeat)
+        seconds = median_seconds(lambda: sample_features(model, 300, SamplingOptions(steps=steps, margin=0)), repeat)
         record(kind="steps", frames=300, steps=steps, backend="onnxruntime", seconds_per_sample=round(seconds, 3))
     for frames in (300, 742):
-        seconds = median_seconds(lambda: sample_features(model, frames, steps=50), args.repeat)
+        seconds = median_seconds(lambda: sample_features(model, frames, SamplingOptions(steps=50, margin=0)), args.repeat)
         record(kind="length", frames=frames, steps=50, backend="onnxruntime", seconds_per_sample=round(seconds, 3))
-    crowd = median_seconds(lambda: sample_features(model, 300, count=16, steps=50), 1)
+    crowd = median_seconds(lambda: sample_features(model, 300, SamplingOptions(count=16, steps=50, margin=0)), 1)
     record(kind="crowd", frames=300, steps=50, count=16, backend="onnxruntime", seconds_per_sample=round(crowd / 16, 3))
     if args.run:
         window = model.trained_window
         torch_model = type(model)(**{**model.__dict__, "denoisers": {window: TorchDenoiser(args.run, window, args.threads)}})
         for frames in (300, 742):
-            ort_s = median_seconds(lambda: sample_features(model, frames, steps=50), args.repeat)
-            torch_s = median_seconds(lambda: sample_features(torch_model, frames, steps=50), args.repeat)
+            ort_s = median_seconds(lambda: sample_features(model, frames, SamplingOptions(steps=50, margin=0)), args.repeat)
+            torch_s = median_seconds(lambda: sample_features(torch_model, frames, SamplingOptions(steps=50, margin=0)), args.repeat)
             record(kind="backend", frames=frames, steps=50, onnxruntime=round(ort_s, 3), torch_eager=round(torch_s, 3),
                    speedup=round(torch_s / ort_s, 2))
     ten_minutes = int(600 * model.codec.fps)

@@ -11,7 +11,7 @@ import pytest
 
 from sinmdm.eval.metrics import evaluate
 from sinmdm.eval.motion_features import eval_features, protocol_for
-from sinmdm.runtime import GenerationRequest, load_model, read_bvh
+from sinmdm.runtime import SamplingOptions, load_model, read_bvh
 from sinmdm.runtime.animation import animation_from_bvh, global_positions
 from sinmdm.runtime.applications import (
     load_reference, load_trajectory, plan_control, plan_expand, plan_harmonize, plan_inbetween, plan_keyframes, run_plan,
@@ -24,7 +24,7 @@ from sinmdm.runtime.sampler import low_pass
 
 from .conftest import DEMO_CLIP, real_clip, run_cli
 
-REQUEST = GenerationRequest(frames=1, count=2, seed=0, steps=10)
+REQUEST = SamplingOptions(count=2, seed=0, steps=10)
 
 
 def positions(clip: BVH) -> np.ndarray:
@@ -115,7 +115,7 @@ def test_trajectory_control_follows_a_path_from_another_skeleton():
     path = real_clip("Joe_traj-example.bvh")  # 24-joint Mixamo skeleton in metres, frame time written wrong
     reference = load_trajectory(model, path, source_fps=30)
     plan = plan_control(model, reference, trajectory=True, frames=300)
-    result = run_plan(model, plan, GenerationRequest(frames=1, count=2, seed=0, steps=10))
+    result = run_plan(model, plan, REQUEST)
     root_path = read_bvh(path).values[:300, [0, 2]]
     want = root_path - root_path[0]
     for clip in result.clips:
@@ -134,7 +134,7 @@ def test_whole_clip_harmonization_keeps_low_frequencies(tiny, reference):
 
 
 def test_partial_harmonization_keeps_the_base_outside(tiny, reference):
-    base = run_plan(tiny, plan_inbetween(tiny, reference), GenerationRequest(frames=1, steps=5)).features[0]
+    base = run_plan(tiny, plan_inbetween(tiny, reference), SamplingOptions(steps=5)).features[0]
     plan = plan_harmonize(tiny, reference, frame_range=(100, 200), base=base, border=10)
     assert plan.guide.keep[:, :90].min() == 1 and plan.guide.keep[:, 210:].min() == 1
     assert plan.guide.harmonize[:, 100:200].min() == 1
@@ -179,7 +179,7 @@ def test_style_transfer_moves_toward_the_model_and_keeps_the_content(tmp_path):
     protocol = protocol_for(clip)
     training = eval_features(clip, protocol)
     before = evaluate(training, [eval_features(read_bvh(jittery), protocol)])["local_diversity"]
-    result = run_plan(model, plan_harmonize(model, reference), GenerationRequest(frames=1, count=2, seed=0, steps=20))
+    result = run_plan(model, plan_harmonize(model, reference), SamplingOptions(count=2, seed=0, steps=20))
     for styled, features in zip(result.clips, result.features):
         after = evaluate(training, [eval_features(styled, protocol)])["local_diversity"]
         assert after < 0.6 * before

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from sinmdm.eval.plausibility import plausibility
-from sinmdm.runtime import GenerationRequest, generate, load_model, read_bvh
+from sinmdm.runtime import SamplingOptions, generate, load_model, read_bvh
 from sinmdm.runtime.animation import Animation, animation_from_bvh, animation_to_bvh, global_positions
 from sinmdm.runtime.cleanup import cleanup_contacts, contact_intervals, contact_offsets
 from sinmdm.runtime.features import build_codec
@@ -21,8 +21,8 @@ from .layouts import z_up
 @pytest.fixture(scope="module")
 def demo():
     model = load_model()
-    plain = generate(model, GenerationRequest(frames=240, count=4, seed=3, cleanup=False))
-    cleaned = generate(model, GenerationRequest(frames=240, count=4, seed=3))
+    plain = generate(model, 240, SamplingOptions(count=4, seed=3, cleanup=False))
+    cleaned = generate(model, 240, SamplingOptions(count=4, seed=3))
     return model, plain, cleaned
 
 

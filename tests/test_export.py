@@ -105,5 +105,6 @@ def test_refuses_unfinished_run(tiny_run, tmp_path):
 def test_refuses_missing_run_and_unwritable_path(tmp_path, tiny_run):
     result = run_cli("sinmdm", "export", str(tmp_path / "nope"), "--out", str(tmp_path / "m.onnx"))
     assert result.returncode == 2 and "not a training run" in result.stderr
-    result = run_cli("sinmdm", "export", str(tiny_run), "--out", str(tmp_path / "missing" / "m.onnx"))
-    assert result.returncode == 2 and "does not exist" in result.stderr
+    (tmp_path / "file").write_text("")
+    result = run_cli("sinmdm", "export", str(tiny_run), "--out", str(tmp_path / "file" / "m.onnx"))
+    assert result.returncode == 2 and "cannot create output directory" in result.stderr

@@ -11,7 +11,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from sinmdm.runtime import GenerationRequest, generate, load_model, read_bvh
+from sinmdm.runtime import SamplingOptions, generate, load_model, read_bvh
 from sinmdm.runtime.animation import animation_from_bvh, global_positions
 from sinmdm.runtime.errors import SinMDMError
 from sinmdm.runtime.model import MotionModel
@@ -109,9 +109,9 @@ def test_loop_refuses_guides_and_short_lengths():
     model = load_model()
     guide = Guide(reference=np.zeros((model.features, 64)), keep=np.ones((model.features, 64)))
     with pytest.raises(SinMDMError, match="guide"):
-        sample_features(model, 128, steps=2, guide=guide, loop=True)
+        sample_features(model, 128, SamplingOptions(steps=2), guide=guide, loop=True)
     with pytest.raises(SinMDMError) as info:
-        sample_features(model, 40, steps=2, loop=True)
+        sample_features(model, 40, SamplingOptions(steps=2), loop=True)
     assert "64 frames" in str(info.value) and "\n" not in str(info.value)
 
 
@@ -148,7 +148,7 @@ def test_same_seed_same_bytes_with_loop(tmp_path, no_torch_env):
 def test_api_displacement_is_the_root_motion_per_cycle():
     model = load_model()
     codec = model.codec
-    result = generate(model, GenerationRequest(frames=96, count=2, seed=1, steps=6, loop=True))
+    result = generate(model, 96, SamplingOptions(count=2, seed=1, steps=6), loop=True)
     assert result.loop_displacement.shape == (2, 2)
     np.testing.assert_allclose(result.loop_displacement, cycle_displacement(codec, result.features))
     h1, h2 = codec.horizontal_axes
@@ -159,7 +159,7 @@ def test_api_displacement_is_the_root_motion_per_cycle():
         # last frame -> first frame of the next cycle is frame 0's velocity (the step across the wrap)
         across = np.array([root[0, h1] + shift[0] - root[-1, h1], root[0, h2] + shift[1] - root[-1, h2]])
         np.testing.assert_allclose(across, features[0, [dx, dz]], atol=1e-4)
-    assert generate(model, GenerationRequest(frames=96, steps=2)).loop_displacement is None
+    assert generate(model, 96, SamplingOptions(steps=2)).loop_displacement is None
 
 
 def _seams(summary: dict, codec, axes: list[str] | None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

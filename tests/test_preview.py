@@ -274,6 +274,33 @@ def test_gif_of_a_large_crowd(tmp_path, demo):
         assert gif.n_frames == 4
 
 
+def test_streamed_gif_holds_every_frame_and_delay(tmp_path):
+    """write_gif streams (one frame held, not all): the file decodes to the frames given, a repeated
+    frame folded into the previous delay, and only changed rectangles stored."""
+    pytest.importorskip("PIL")
+    from PIL import Image, ImageSequence
+
+    from sinmdm.preview.render import BACKGROUND, write_gif
+
+    inks = ["#e4572e", "#2e86de"]
+    canvas = np.full((40, 60, 4), 255, np.uint8)
+    canvas[..., :3] = (np.array([int(BACKGROUND[k:k + 2], 16) for k in (1, 3, 5)]))
+    frames = []
+    for k in range(5):
+        frame = canvas.copy()
+        frame[10:20, 5 + 10 * min(k, 3):15 + 10 * min(k, 3), :3] = (0xe4, 0x57, 0x2e)  # frames 3 and 4 equal
+        frames.append(frame)
+    out = tmp_path / "streamed.gif"
+    write_gif(out, iter(frames), [30, 40, 30, 30, 40], inks)
+    with Image.open(out) as gif:
+        decoded = [(np.asarray(f.convert("RGB")), f.info["duration"], f.dispose_extent)
+                   for f in ImageSequence.Iterator(gif)]
+    assert [d for _, d, _ in decoded] == [30, 40, 30, 70]
+    assert [extent for _, _, extent in decoded] == [(0, 0, 60, 40), (5, 10, 25, 20), (15, 10, 35, 20), (25, 10, 45, 20)]
+    for (pixels, _, _), frame in zip(decoded, frames):
+        assert np.array_equal(pixels, frame[..., :3])
+
+
 def test_cli_preview_writes_and_refuses_to_overwrite(tmp_path):
     pytest.importorskip("matplotlib")
     out = tmp_path / "x.gif"

@@ -4,17 +4,27 @@ best check, and an export that carries the choice to `sinmdm-run sample`."""
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import pytest
 
 from sinmdm.eval.metrics import harmonic_mean
-from sinmdm.train.checkpoint import load_config, read_log
-from sinmdm.train.watch import BEST, COPYING, PEAKED, WatchState, balance, in_band
+from sinmdm.train.checkpoint import BEST, load_config, read_log
+from sinmdm.train.watch import COPYING, PEAKED, WatchState, balance, in_band
 
 from .conftest import DEMO_CLIP, run_cli
 
 # (coverage, global diversity) rows of the issue's table and the paper
 PAPER_ROW, COPYING_ROW, DRIFTING_ROW = (98.1, 1.55), (100.0, 1.01), (75.6, 1.89)
+
+
+def test_balance_ranks_a_shaking_model_below_a_steady_one():
+    # logged checks of the Joe walk (bench/results/watched.json): the frame-norm stage's best
+    # against the GroupNorm stage's, coverage / global diversity / jitter (x the clip's jerk)
+    shaking, steady = balance(97.07, 1.5957, 5.205), balance(90.92, 1.1702, 2.516)
+    assert shaking < steady
+    assert balance(97.07, 1.5957, 2.0) == balance(97.07, 1.5957)  # within the limit: no effect
+    assert not in_band({"coverage": 97.07, "global_diversity": 1.5957, "jitter_ratio": 5.205})
 
 
 def test_balance_ranks_the_paper_above_copying_and_drifting():
@@ -144,3 +154,15 @@ def test_export_follows_a_chosen_second_stage(watched_run, tiny_run, tmp_path):
     staged, tiny = load_model(tmp_path / "s_w48.onnx"), load_model(tmp_path / "t_w48.onnx")
     assert staged.metadata["model_id"] == tiny.metadata["model_id"]
     assert staged.metadata["provenance"]["checkpoint"]["stage"] == "norm-frame"
+
+
+def test_damaged_best_checkpoint_is_refused_by_export(watched_run, tmp_path):
+    import shutil
+
+    from .test_checkpoints import assert_one_line_error, flip_bytes
+
+    run_dir = Path(shutil.copytree(watched_run, tmp_path / "run"))
+    flip_bytes(run_dir / BEST)
+    result = run_cli("sinmdm", "export", str(run_dir), "--out", str(tmp_path / "m.onnx"))
+    assert_one_line_error(result, str(run_dir / BEST), "corrupted")
+    assert not list(tmp_path.glob("*.onnx"))

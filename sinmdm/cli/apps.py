@@ -1,159 +1,79 @@
 """`sinmdm-run inbetween|expand|keyframes|control|harmonize`: thin commands over
-sinmdm.runtime.applications, sharing the sampling options of `sample`."""
+sinmdm.runtime.applications, taking every option of `sample` (cli/options.py)."""
 
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Optional
+from typing import Annotated, Optional
 
 import typer
 
-from ..runtime.errors import SinMDMError
-from ..runtime.sampler import DEFAULT_STEPS
-from .common import console, print_json
+from ..runtime import applications as apps
+from .options import Context, Job, Ref, SourceFps, sampling_command
 
-Models = typer.Argument(None, help="Model .onnx file(s) (default: the bundled demo model).")
-Ref = typer.Option(..., "--ref", "-r", help="Reference BVH on the model's skeleton.")
-RefFps = typer.Option(None, "--ref-fps", help="Override the reference's frame rate (files with a wrong Frame Time).")
-Count = typer.Option(1, "--count", "-n", help="How many motions (sample i uses seed + i).")
-Seed = typer.Option(0, "--seed")
-Sampler = typer.Option("ddpm", "--sampler", help="ddpm or ddim.")
-Steps = typer.Option(None, "--steps", help="Denoising steps (default: the model's measured setting, else "
-                     f"{DEFAULT_STEPS}; 1000 = the paper's full chain).")
-Out = typer.Option(Path("sinmdm_out"), "--out", "-o", help="Output directory.")
-Force = typer.Option(False, "--force", help="Overwrite existing files.")
-Json = typer.Option(False, "--json", help="Print a JSON summary.")
-Preview = typer.Option(False, "--preview", help="Also write a GIF preview (needs the preview extra).")
-Cleanup = typer.Option(True, "--cleanup/--no-cleanup", help="Pin the feet where the model predicts contacts (leg IK).")
+Ramp = Annotated[int, typer.Option("--ramp", help="Frames of linear blend at each border.")]
+KeepStart = Annotated[float, typer.Option("--keep-start", help="Share of the reference kept at the start, in [0, 1).")]
+KeepEnd = Annotated[float, typer.Option("--keep-end", help="Share kept at the end, in [0, 1).")]
+Before = Annotated[float, typer.Option("--before", help="Share of the reference's length to add before.")]
+After = Annotated[float, typer.Option("--after", help="Share to add after.")]
+Joints = Annotated[Optional[str], typer.Option("--joints", help="upper-body, lower-body, or comma-separated joint names.")]
 
 
-def _run(command: str, models, ref: Path, ref_fps, count, seed, sampler, steps, out, force, as_json, preview,
-         make_plan, cleanup: bool = True) -> None:
-    from ..runtime.applications import load_reference, run_plan
-    from ..runtime.generate import GenerationRequest
-    from ..runtime.outputs import write_outputs
-    from ..runtime.model import load_model
-
-    model = load_model(models or None)
-    steps = model.default_steps if steps is None else steps
-    plan = make_plan(model, lambda: load_reference(model, ref, ref_fps))
-    request = GenerationRequest(frames=plan.frames, count=count, seed=seed, sampler=sampler, steps=steps, cleanup=cleanup)
-    result = run_plan(model, plan, request)
-    written = write_outputs(model, result, out, name=command, preview=preview, force=force)
-    summary = {"command": command, "reference": str(ref), "frames": plan.frames, "count": count, "seed": seed,
-               "steps": steps, "cleanup": cleanup, "elapsed_seconds": round(result.seconds, 3), "files": [str(p) for p in written]}
-    if as_json:
-        print_json(summary)
-    else:
-        console.print(f"{command}: wrote {len(written)} file(s) to [bold]{out}[/bold] ({plan.frames} frames each, "
-                      f"{result.seconds:.2f} s)")
+def _plan_job(context: Context, ref: Path, plan: "apps.Plan") -> Job:
+    return Job(plan.frames, lambda progress: apps.run_plan(context.model, plan, context.options, progress, context.force),
+               summary={"reference": str(ref)})
 
 
-def _range(text: Optional[str]) -> Optional[tuple[int, int]]:
-    if not text:
-        return None
-    try:
-        start, stop = (int(v) for v in text.split(":"))
-    except ValueError:
-        raise SinMDMError(f"--frames takes START:STOP (frames), got '{text}'") from None
-    return start, stop
+def _reference(context: Context, ref: Path, source_fps: Optional[float]) -> "apps.Reference":
+    return apps.load_reference(context.model, ref, source_fps, context.force)
 
 
 def register(app: typer.Typer) -> None:
-    @app.command()
-    def inbetween(models: Optional[list[Path]] = Models, ref: Path = Ref, ref_fps: Optional[float] = RefFps,
-                  keep_start: float = typer.Option(0.25, "--keep-start", help="Share of the reference kept at the start."),
-                  keep_end: float = typer.Option(0.25, "--keep-end", help="Share kept at the end."),
-                  ramp: int = typer.Option(10, "--ramp", help="Frames of linear blend at each border."),
-                  count: int = Count, seed: int = Seed, sampler: str = Sampler, steps: int = Steps,
-                  out: Path = Out, force: bool = Force, as_json: bool = Json, preview: bool = Preview,
-                  cleanup: bool = Cleanup) -> None:
+    @sampling_command(app)
+    def inbetween(context: Context, ref: Ref, source_fps: SourceFps = None, keep_start: KeepStart = apps.INBETWEEN_KEEP,
+                  keep_end: KeepEnd = apps.INBETWEEN_KEEP, ramp: Ramp = apps.INBETWEEN_RAMP) -> Job:
         """Keep the start and end of a clip and generate the motion in between."""
-        from ..runtime.applications import plan_inbetween
+        reference = _reference(context, ref, source_fps)
+        return _plan_job(context, ref, apps.plan_inbetween(context.model, reference, keep_start, keep_end, ramp))
 
-        _run("inbetween", models, ref, ref_fps, count, seed, sampler, steps, out, force, as_json, preview,
-             lambda m, load: plan_inbetween(m, load(), keep_start, keep_end, ramp), cleanup)
-
-    @app.command()
-    def expand(models: Optional[list[Path]] = Models, ref: Path = Ref, ref_fps: Optional[float] = RefFps,
-               before: float = typer.Option(0.15, "--before", help="Share of the reference's length to add before."),
-               after: float = typer.Option(0.15, "--after", help="Share to add after."),
-               ramp: int = typer.Option(6, "--ramp", help="Frames of linear blend at each border."),
-               count: int = Count, seed: int = Seed, sampler: str = Sampler, steps: int = Steps,
-               out: Path = Out, force: bool = Force, as_json: bool = Json, preview: bool = Preview,
-               cleanup: bool = Cleanup) -> None:
+    @sampling_command(app)
+    def expand(context: Context, ref: Ref, source_fps: SourceFps = None, before: Before = apps.EXPAND_SHARE,
+               after: After = apps.EXPAND_SHARE, ramp: Ramp = apps.EXPAND_RAMP) -> Job:
         """Extend a clip with new motion before and after it."""
-        from ..runtime.applications import plan_expand
+        reference = _reference(context, ref, source_fps)
+        return _plan_job(context, ref, apps.plan_expand(context.model, reference, before, after, ramp, context.force))
 
-        _run("expand", models, ref, ref_fps, count, seed, sampler, steps, out, force, as_json, preview,
-             lambda m, load: plan_expand(m, load(), before, after, ramp), cleanup)
-
-    @app.command()
-    def keyframes(models: Optional[list[Path]] = Models, ref: Path = Ref, ref_fps: Optional[float] = RefFps,
-                  frames: Optional[str] = typer.Option(None, "--frames", help="Comma-separated reference frames to keep (model frame rate)."),
-                  every: Optional[int] = typer.Option(None, "--every", help="Keep every N-th frame instead."),
-                  hold: int = typer.Option(0, "--hold", help="Also keep this many frames either side of each key."),
-                  count: int = Count, seed: int = Seed, sampler: str = Sampler, steps: int = Steps,
-                  out: Path = Out, force: bool = Force, as_json: bool = Json, preview: bool = Preview,
-                  cleanup: bool = Cleanup) -> None:
+    @sampling_command(app)
+    def keyframes(context: Context, ref: Ref, source_fps: SourceFps = None,
+                  frames: Annotated[Optional[str], typer.Option("--frames", help="Comma-separated reference frames to keep (model frame rate).")] = None,
+                  every: Annotated[Optional[int], typer.Option("--every", help="Keep every N-th frame instead (default: one a second).")] = None,
+                  hold: Annotated[int, typer.Option("--hold", help="Also keep this many frames either side of each key.")] = 0) -> Job:
         """Keep sparse key poses of a clip and generate the motion around them."""
-        from ..runtime.applications import plan_keyframes
+        reference = _reference(context, ref, source_fps)
+        keys = apps.parse_keyframes(frames) if frames else apps.default_keyframes(context.model, reference, every)
+        return _plan_job(context, ref, apps.plan_keyframes(context.model, reference, keys, hold))
 
-        def plan(m, load):
-            reference = load()
-            if frames:
-                try:
-                    keys = [int(v) for v in frames.split(",") if v.strip()]
-                except ValueError:
-                    raise SinMDMError(f"--frames takes comma-separated frame numbers, got '{frames}'") from None
-            else:
-                step = every or int(round(m.codec.fps))
-                keys = list(range(0, reference.frames, step))
-            return plan_keyframes(m, reference, keys, hold)
-
-        _run("keyframes", models, ref, ref_fps, count, seed, sampler, steps, out, force, as_json, preview, plan,
-             cleanup)
-
-    @app.command()
-    def control(models: Optional[list[Path]] = Models, ref: Path = Ref, ref_fps: Optional[float] = RefFps,
-                joints: Optional[str] = typer.Option(None, "--joints", help="upper-body, lower-body, or comma-separated joint names to keep."),
-                subtree: Optional[str] = typer.Option(None, "--subtree", help="Keep this joint and everything below it."),
-                trajectory: bool = typer.Option(False, "--trajectory", help="Keep the root path (x/z motion and heading); the reference may be any skeleton."),
-                count: int = Count, seed: int = Seed, sampler: str = Sampler, steps: int = Steps,
-                out: Path = Out, force: bool = Force, as_json: bool = Json, preview: bool = Preview,
-                cleanup: bool = Cleanup) -> None:
+    @sampling_command(app)
+    def control(context: Context, ref: Ref, source_fps: SourceFps = None, joints: Joints = None,
+                subtree: Annotated[Optional[str], typer.Option("--subtree", help="Keep this joint and everything below it.")] = None,
+                trajectory: Annotated[bool, typer.Option("--trajectory", help="Keep the root path (x/z motion and heading); the reference may be any skeleton.")] = False) -> Job:
         """Keep some joints (or the root path) of a clip and generate the rest of the body."""
-        from ..runtime.applications import load_reference, load_trajectory, plan_control
+        reference = apps.load_control_reference(context.model, ref, source_fps, joints, subtree, trajectory, context.force)
+        return _plan_job(context, ref, apps.plan_control(context.model, reference, joints, subtree, trajectory))
 
-        def plan(m, load):
-            reference = load_trajectory(m, ref, ref_fps) if trajectory and not (joints or subtree) else load_reference(m, ref, ref_fps)
-            return plan_control(m, reference, joints, subtree, trajectory)
-
-        _run("control", models, ref, ref_fps, count, seed, sampler, steps, out, force, as_json, preview, plan,
-             cleanup)
-
-    @app.command()
-    def harmonize(models: Optional[list[Path]] = Models, ref: Path = Ref, ref_fps: Optional[float] = RefFps,
-                  frames: Optional[str] = typer.Option(None, "--frames", help="START:STOP: harmonize only these frames of the reference, pasted into a generated motion."),
-                  joints: Optional[str] = typer.Option(None, "--joints", help="Harmonize only these joints (upper-body, lower-body or names)."),
-                  factor: int = typer.Option(2, "--factor", help="Low-pass down/up-sampling factor N of ILVR."),
-                  border: int = typer.Option(10, "--border", help="Frames around a pasted portion that are harmonized too."),
-                  count: int = Count, seed: int = Seed, sampler: str = Sampler, steps: int = Steps,
-                  out: Path = Out, force: bool = Force, as_json: bool = Json, preview: bool = Preview,
-                  cleanup: bool = Cleanup) -> None:
+    @sampling_command(app)
+    def harmonize(context: Context, ref: Ref, source_fps: SourceFps = None,
+                  frames: Annotated[Optional[str], typer.Option("--frames", help="START:STOP: harmonize only these frames of the reference, pasted into a generated motion.")] = None,
+                  joints: Joints = None,
+                  factor: Annotated[int, typer.Option("--factor", help="Low-pass down/up-sampling factor N of ILVR (at least 1).")] = 2,
+                  border: Annotated[int, typer.Option("--border", help="Frames around a pasted portion that are harmonized too.")] = apps.HARMONIZE_BORDER) -> Job:
         """Restyle a clip with the model's motion (style transfer), or blend a pasted portion in."""
-        from ..runtime.applications import plan_harmonize
-        from ..runtime.generate import GenerationRequest, generate
+        reference = _reference(context, ref, source_fps)
+        span = apps.parse_frame_range(frames) if frames else None
+        apps.check_harmonize(context.model, reference, factor, span, joints, border)
 
-        def plan(m, load):
-            reference = load()
-            span = _range(frames)
-            base = None
-            if span or joints:
-                request = GenerationRequest(frames=reference.frames, count=1, seed=seed, sampler=sampler,
-                                            steps=m.default_steps if steps is None else steps)
-                base = generate(m, request).features[0]
-            return plan_harmonize(m, reference, factor, span, joints, base, border)
+        def run(progress):
+            return apps.harmonize(context.model, reference, context.options, factor, span, joints, border, progress,
+                                  context.force)
 
-        _run("harmonize", models, ref, ref_fps, count, seed, sampler, steps, out, force, as_json, preview, plan,
-             cleanup)
+        return Job(reference.frames, run, summary={"reference": str(ref)})

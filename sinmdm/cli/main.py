@@ -31,11 +31,12 @@ def _require_torch() -> None:
 def train(
     clip: Path = typer.Argument(..., help="The BVH clip to learn from."),
     out: Path = typer.Option(..., "--out", "-o", help="Run directory (checkpoints, config, log)."),
-    preset: str = typer.Option("cpu", "--preset", help="Recipe: cpu (minutes on a laptop) or paper (the authors', needs a GPU)."),
-    steps: Optional[int] = typer.Option(None, "--steps", help="Total iterations to reach (default: the preset's)."),
+    preset: str = typer.Option("cpu", "--preset", help="Recipe: cpu (the watched recipe: 6-34 min on 2 cores as measured) or paper (the authors', needs a GPU)."),
+    steps: Optional[int] = typer.Option(None, "--steps", help="Total iterations to reach (default: the preset's; with --resume, the run's own). "
+                                         "A finished run continues only when --steps raises its total."),
     device: str = typer.Option("auto", "--device", help="auto (CUDA, then MPS, then CPU), cpu, cuda, mps."),
     seed: int = typer.Option(0, "--seed"),
-    resume: bool = typer.Option(False, "--resume", help="Continue the run in --out from its last checkpoint."),
+    resume: bool = typer.Option(False, "--resume", help="Continue the run in --out from its last (verified) checkpoint."),
     width: Optional[int] = typer.Option(None, "--width", help="Network width (paper: 256)."),
     crop: Optional[int] = typer.Option(None, "--crop", help="Training crop length in frames (cpu preset: 64)."),
     batch: Optional[int] = typer.Option(None, "--batch", help="Batch size (default 64)."),
@@ -58,9 +59,10 @@ def train(
 
     from dataclasses import replace
 
+    from ..train.checkpoint import CONFIG
     from ..train.model import NORM_KINDS
     from ..train.presets import preset as get_preset
-    from ..train.trainer import kept_sampling, train as run_training
+    from ..train.trainer import kept_sampling, resumed_budget, train as run_training
 
     if norm is not None and norm not in NORM_KINDS:
         raise SinMDMError(f"--norm must be {' or '.join(NORM_KINDS)}, got '{norm}'")
@@ -72,27 +74,35 @@ def train(
     )
     if check_every is not None:
         config = config.with_overrides(check_every=check_every or None) if check_every else replace(config, check_every=None)
+    if resume and steps is None and (out / CONFIG).is_file():
+        config = resumed_budget(out, config)
     codec_options = {"units": units, "source_fps": source_fps, "root": root, "up": up,
                      "contacts": "auto" if not contacts else [c.strip() for c in contacts.split(",")]}
     if units == "auto" and not resume:
         _warn_about_units(clip, config.fps, codec_options)
-    with Progress(
+    # shown from the first step on, so that an error found before training is the only output
+    progress = Progress(
         TextColumn("[bold]training[/bold]"), BarColumn(), TextColumn("{task.completed}/{task.total}"),
         TextColumn("loss {task.fields[loss]:.4f}"), TextColumn("{task.fields[rate]:.2f} it/s"),
         TimeElapsedColumn(), TimeRemainingColumn(), console=console, transient=False,
-    ) as progress:
-        task = progress.add_task("train", total=config.steps, loss=float("nan"), rate=0.0)
+    )
+    task = progress.add_task("train", total=config.steps, loss=float("nan"), rate=0.0)
 
-        def on_progress(step: int, total: int, loss: float, rate: float) -> None:
-            progress.update(task, completed=step, loss=loss, rate=rate)
+    def on_progress(step: int, total: int, loss: float, rate: float) -> None:
+        progress.start()
+        progress.update(task, completed=step, loss=loss, rate=rate)
 
-        def on_check(step: int, scores: dict, best_step: int) -> None:
-            progress.console.print(f"check at step {step}: {_scores_line(scores)}"
-                                   + ("  [bold]best[/bold]" if best_step == step else f"  (best: step {best_step})"))
+    def on_check(step: int, scores: dict, best_step: int) -> None:
+        progress.console.print(f"check at step {step}: {_scores_line(scores)}"
+                               + ("  [bold]best[/bold]" if best_step == step else f"  (best: step {best_step})"))
 
+    try:
         result = run_training(clip, out, config, seed=seed, device=device, resume=resume,
                               codec_options=codec_options, on_progress=on_progress, on_check=on_check)
         progress.update(task, completed=result["step"])
+    finally:
+        if progress.live.is_started:
+            progress.stop()
     console.print(
         f"run [bold]{out}[/bold]: step {result['step']}/{result['steps']}, loss {result['loss']}, "
         f"{result['parameters']:,} parameters, window {result['window']} frames, "
@@ -189,9 +199,9 @@ def info(
 
 
 def _print_checks(run_dir: Path) -> None:
-    from ..train.checkpoint import read_log
+    from ..train.checkpoint import check_records
 
-    checks = [r for r in read_log(run_dir) if "check" in r]
+    checks = check_records(run_dir)
     table = Table(title="quality checks (EMA weights)")
     for column in ("step", "coverage %", "global", "local", "balance", "jitter", "s"):
         table.add_column(column, justify="right")

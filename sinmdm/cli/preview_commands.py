@@ -10,6 +10,7 @@ from typing import List, Optional
 
 import typer
 
+from ..runtime.atomic import OutputSet
 from ..runtime.errors import SinMDMError
 from .common import RootOption, UpOption, console, print_json
 
@@ -39,30 +40,34 @@ def preview(
     suffix = out.suffix.lower()
     if suffix not in OUTPUT_SUFFIXES:
         raise SinMDMError(f"cannot write '{out.suffix or out.name}' previews: use .gif, .mp4 or .html")
-    outputs = [out] + ([out.with_suffix(".html")] if html and suffix != ".html" else [])
-    for path in outputs:
-        if path.exists() and not force:
-            raise SinMDMError(f"{path} exists; pass --force to overwrite")
+    html_out = out.with_suffix(".html")
+    outputs = [out] + ([html_out] if html and suffix != ".html" else [])
     label_list = _labels(labels, len(clips))
     image_size = _size(size)
     from ..runtime.rig import parse_up
 
     parse_up(up)  # refuse a bad --up before reading any clip
+    files = OutputSet(out.parent, [path.name for path in outputs], force=force)  # every output check before any work
 
     from ..runtime.bvh import read_bvh
 
     bvhs = [read_bvh(path) for path in clips]
     summary: dict = {"clips": [str(c) for c in clips], "outputs": [str(p) for p in outputs]}
-    if suffix != ".html":
-        from ..preview.render import render_preview
+    with files:
+        if suffix != ".html":
+            from ..preview.render import render_file
 
-        info = render_preview(bvhs, out, fps=source_fps, labels=label_list, size=image_size,
-                              max_seconds=max_seconds, units=units, root=root, up=up)
-        summary.update(frames=info.frames, fps=info.fps, size=list(info.size))
-    if html or suffix == ".html":
-        from ..preview.viewer import write_viewer
+            infos = []
+            files.write(out.name, lambda tmp: infos.append(render_file(
+                bvhs, tmp, fps=source_fps, labels=label_list, size=image_size, max_seconds=max_seconds,
+                units=units, root=root, up=up, suffix=suffix)))
+            summary.update(frames=infos[0].frames, fps=infos[0].fps, size=list(infos[0].size))
+        if html or suffix == ".html":
+            from ..preview.viewer import viewer_html
 
-        write_viewer(bvhs, outputs[-1], labels=label_list, fps=source_fps, units=units, root=root, up=up)
+            files.write_text(html_out.name, viewer_html(bvhs, labels=label_list, fps=source_fps, units=units,
+                                                        root=root, up=up))
+        files.commit()
     if as_json:
         print_json(summary)
         return
@@ -70,7 +75,7 @@ def preview(
         width, height = summary["size"]
         console.print(f"wrote [bold]{out}[/bold]: {summary['frames']} frames at {summary['fps']:g} fps, {width}x{height}")
     if html or suffix == ".html":
-        console.print(f"wrote [bold]{outputs[-1]}[/bold]: open it in a browser (drag to orbit, space to play)")
+        console.print(f"wrote [bold]{html_out}[/bold]: open it in a browser (drag to orbit, space to play)")
 
 
 def _labels(value: Optional[str], count: int) -> Optional[list[str]]:

@@ -3,16 +3,16 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Optional
+from typing import Annotated, Optional
 
 import numpy as np
 import typer
 from rich.table import Table
 from rich.tree import Tree
 
-from ..runtime.errors import SinMDMError
-from ..runtime.sampler import DEFAULT_STEPS as DEFAULT_STEPS_CLI, EDGE_MARGIN
+from ..runtime.errors import OptionError
 from .common import RootOption, UpOption, console, print_json, run_app
+from .options import Context, Job, SourceFps, sampling_command
 
 app = typer.Typer(
     name="sinmdm-run",
@@ -22,7 +22,6 @@ app = typer.Typer(
 )
 
 UnitsOption = typer.Option("auto", "--units", help="File units: auto, m, cm, mm, in, ft, or metres per unit.")
-SourceFpsOption = typer.Option(None, "--source-fps", help="Override the clip's frame rate (for files with a wrong Frame Time).")
 ContactsOption = typer.Option(None, "--contacts", help="Comma-separated contact joint names (default: detected).")
 
 
@@ -46,7 +45,7 @@ def _joint_tree(skeleton, contact_names: set[str]) -> Tree:
 def inspect(
     clip: Path = typer.Argument(..., help="A BVH file."),
     units: str = UnitsOption,
-    source_fps: Optional[float] = SourceFpsOption,
+    source_fps: SourceFps = None,
     contacts: Optional[str] = ContactsOption,
     fps: float = typer.Option(30.0, "--fps", help="Feature frame rate used to detect contacts."),
     root: Optional[str] = RootOption,
@@ -116,7 +115,7 @@ def convert(
     target: Path = typer.Argument(..., help="Output BVH."),
     fps: Optional[float] = typer.Option(None, "--fps", help="Output frame rate (default: the input's)."),
     units: str = UnitsOption,
-    source_fps: Optional[float] = SourceFpsOption,
+    source_fps: SourceFps = None,
     contacts: Optional[str] = ContactsOption,
     root: Optional[str] = RootOption,
     up: str = UpOption,
@@ -125,24 +124,25 @@ def convert(
 ) -> None:
     """Read a clip, encode it to model features, decode and write it back."""
     from ..runtime.animation import animation_from_bvh, global_positions, nominal_fps
-    from ..runtime.bvh import read_bvh, write_bvh
+    from ..runtime.atomic import OutputSet
+    from ..runtime.bvh import format_bvh, read_bvh
     from ..runtime.features import build_codec, skeleton_size
 
-    if target.exists() and not force:
-        raise SinMDMError(f"{target} exists; pass --force to overwrite")
     if target.suffix.lower() not in (".bvh", ".glb"):
-        raise SinMDMError(f"cannot write '{target.suffix}' files: use .bvh or .glb")
-    bvh = read_bvh(source)
-    rate = fps or source_fps or nominal_fps(bvh.frame_time)
-    codec = build_codec(bvh, fps=rate, units=units, contacts=_contacts(contacts), source_fps=source_fps, root=root, up=up)
-    features = codec.encode(bvh, source_fps=source_fps)
-    out = codec.decode_bvh(features, codec.start_position(bvh, source_fps=source_fps))
-    if target.suffix.lower() == ".glb":
-        from ..preview.gltf import write_glb
+        raise OptionError("target", f"cannot write '{target.suffix}' files: use .bvh or .glb")
+    with OutputSet.for_file(target, force=force, option="target") as output:
+        bvh = read_bvh(source)
+        rate = fps or source_fps or nominal_fps(bvh.frame_time)
+        codec = build_codec(bvh, fps=rate, units=units, contacts=_contacts(contacts), source_fps=source_fps, root=root, up=up)
+        features = codec.encode(bvh, source_fps=source_fps)
+        out = codec.decode_bvh(features, codec.start_position(bvh, source_fps=source_fps))
+        if target.suffix.lower() == ".glb":
+            from ..preview.gltf import bvh_to_glb
 
-        write_glb(out, target, units=units, root=root, up=up)
-    else:
-        write_bvh(target, out)
+            output.write_bytes(target.name, bvh_to_glb(out, units=units, root=root, up=up))
+        else:
+            output.write_text(target.name, format_bvh(out))
+        output.commit()
     summary = {"source": str(source), "target": str(target), "frames": out.frames, "fps": out.fps,
                "feature_width": codec.width}
     if fps is None:
@@ -158,101 +158,35 @@ def convert(
             console.print(f"round-trip joint position error: {summary['max_position_error_of_size']:.2e} of skeleton size")
 
 
-ModelArgument = typer.Argument(None, help="Model .onnx file(s), one per window (default: the bundled demo model).")
-
-
-def _progress(total_label: str):
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
-
-    return Progress(TextColumn(f"[bold]{total_label}[/bold]"), BarColumn(), MofNCompleteColumn(),
-                    TimeElapsedColumn(), TimeRemainingColumn(), console=console, transient=True)
-
-
-@app.command()
+@sampling_command(app)
 def sample(
-    models: Optional[list[Path]] = ModelArgument,
-    seconds: Optional[float] = typer.Option(None, "--seconds", help="Length in seconds."),
-    frames: Optional[int] = typer.Option(None, "--frames", help="Length in frames (default: twice the window, or 10 s)."),
-    count: int = typer.Option(1, "--count", "-n", help="How many motions (sample i uses seed + i)."),
-    seed: int = typer.Option(0, "--seed"),
-    sampler: str = typer.Option("ddpm", "--sampler", help="ddpm (ancestral) or ddim (deterministic with --eta 0)."),
-    steps: Optional[int] = typer.Option(None, "--steps", help="Denoising steps (default: the model's measured setting "
-                                        f"from training, else {DEFAULT_STEPS_CLI}; 1000 = the paper's full chain)."),
-    eta: float = typer.Option(0.0, "--eta", help="DDIM noise (0 = deterministic)."),
-    hop: Optional[int] = typer.Option(None, "--hop", help="Frames between overlapping windows (default: the model's "
-                                      "measured setting, else half a window)."),
-    loop: bool = typer.Option(False, "--loop", help="A seamless cycle: the file holds T frames whose last flows into the "
-                              "first; the root moves by the loop displacement (summary) each cycle. At least one window long."),
-    margin: int = typer.Option(EDGE_MARGIN, "--margin", help="Frames sampled beyond each end and cut off "
-                               "(steadier first and last frames; 0 = the paper's sampler)."),
-    cleanup: bool = typer.Option(True, "--cleanup/--no-cleanup", help="Pin the feet (contact joints) where the model "
-                                 "predicts contacts, with IK on the legs (removes foot sliding)."),
-    out: Path = typer.Option(Path("sinmdm_out"), "--out", "-o", help="Output directory."),
-    name: str = typer.Option("sample", "--name", help="File name prefix."),
-    fmt: str = typer.Option("bvh", "--format", help="bvh or glb (glb needs the preview extra)."),
-    npz: bool = typer.Option(False, "--npz", help="Also write features and joint positions as .npz."),
-    preview: bool = typer.Option(False, "--preview", help="Also write a GIF preview (needs the preview extra)."),
-    threads: Optional[int] = typer.Option(None, "--threads", help="onnxruntime threads (default: all cores)."),
-    force: bool = typer.Option(False, "--force", help="Allow very long motions and overwrite existing files."),
-    as_json: bool = typer.Option(False, "--json", help="Print a JSON summary on stdout."),
-) -> None:
+    context: Context,
+    seconds: Annotated[Optional[float], typer.Option("--seconds", help="Length in seconds.")] = None,
+    frames: Annotated[Optional[int], typer.Option("--frames", help="Length in frames (default: 10 s).")] = None,
+    loop: Annotated[bool, typer.Option("--loop", help="A seamless cycle: the file holds T frames whose last flows into "
+                                       "the first; the root moves by the loop displacement (summary) each cycle. At "
+                                       "least one window long.")] = False,
+) -> Job:
     """Generate new motions from a trained model and write them as BVH."""
-    from ..runtime.generate import GenerationRequest, generate
-    from ..runtime.outputs import write_outputs
-    from ..runtime.model import load_model
+    from ..runtime.generate import generate
+    from ..runtime.options import length_in_frames
 
-    model = load_model(models or None, threads=threads)
-    length = _length(model, seconds, frames, force)
-    steps = model.default_steps if steps is None else steps
-    hop = model.default_hop(length) if hop is None else hop
-    request = GenerationRequest(frames=length, count=count, seed=seed, sampler=sampler, steps=steps, eta=eta, hop=hop,
-                                loop=loop, cleanup=cleanup, margin=margin)
-    with _progress(f"sampling {count} x {length} frames") as progress:
-        task = progress.add_task("sample", total=steps if steps else len(model.alphas_cumprod))
-        result = generate(model, request, progress=lambda done, total: progress.update(task, completed=done, total=total))
-    written = write_outputs(model, result, out, name=name, fmt=fmt, npz=npz, preview=preview, force=force)
-    summary = {
-        "model": [str(d.path) for d in model.denoisers.values()],
-        "frames": length, "fps": model.codec.fps, "seconds": length / model.codec.fps,
-        "count": count, "seed": seed, "sampler": sampler, "steps": steps, "hop": hop, "cleanup": cleanup,
-        "elapsed_seconds": round(result.seconds, 3), "files": [str(p) for p in written],
-    }
-    if loop:
+    model = context.model
+    length = length_in_frames(model.codec.fps, seconds, frames, context.force)
+
+    def report(result) -> tuple[dict, list[str]]:
+        if not loop:
+            return {}, []
         from ..runtime.rig import AXIS_NAMES
 
         axes = [AXIS_NAMES[a] for a in model.codec.horizontal_axes]
         # per clip: root metres per cycle along the root's horizontal axes (its parent's frame)
-        summary["loop"] = True
-        summary["loop_displacement_m"] = [dict(zip(axes, map(float, d))) for d in result.loop_displacement]
-    if as_json:
-        print_json(summary)
-    else:
-        console.print(f"wrote {len(written)} file(s) to [bold]{out}[/bold]: {count} x {length} frames "
-                      f"({length / model.codec.fps:.1f} s at {model.codec.fps:g} fps) in {result.seconds:.2f} s")
-        if loop:
-            moves = "; ".join(", ".join(f"{a} {v:+.3f}" for a, v in d.items()) for d in summary["loop_displacement_m"])
-            console.print(f"loops of {length} frames; the root moves per cycle (m): {moves}")
+        moves = [dict(zip(axes, map(float, d))) for d in result.loop_displacement]
+        text = "; ".join(", ".join(f"{a} {v:+.3f}" for a, v in d.items()) for d in moves)
+        return {"loop": True, "loop_displacement_m": moves}, [f"loops of {length} frames; the root moves per cycle (m): {text}"]
 
-
-MAX_SECONDS = 3600.0
-
-
-def _length(model, seconds: Optional[float], frames: Optional[int], force: bool) -> int:
-    if seconds is not None and frames is not None:
-        raise SinMDMError("give --seconds or --frames, not both")
-    if seconds is not None:
-        if not seconds > 0:
-            raise SinMDMError("--seconds must be positive")
-        length = int(round(seconds * model.codec.fps))
-    elif frames is not None:
-        length = frames
-    else:
-        length = int(round(10 * model.codec.fps))
-    if length < 1:
-        raise SinMDMError("the length must be at least 1 frame")
-    if length > MAX_SECONDS * model.codec.fps and not force:
-        raise SinMDMError(f"{length} frames is over {MAX_SECONDS / 60:.0f} minutes; pass --force if you mean it")
-    return length
+    return Job(length, lambda progress: generate(model, length, context.options, loop=loop, progress=progress),
+               report=report)
 
 
 def _register_optional_commands() -> None:

@@ -9,13 +9,13 @@ projection; mplot3d would re-sort and re-project every artist each frame.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Iterator, Sequence
 
 import numpy as np
 
-from ..runtime.atomic import atomic_path
+from ..runtime.atomic import OutputSet
 from ..runtime.bvh import BVH
 from ..runtime.errors import SinMDMError
 from . import CLIP_COLOURS, StickFigure, import_extra, nice_step, smooth_track, stick_figure
@@ -40,7 +40,17 @@ class RenderInfo:
     size: tuple[int, int]
 
 
-def render_preview(
+def render_preview(clips: Sequence[BVH], out: str | Path, force: bool = True, **options) -> RenderInfo:
+    """render_file, written atomically (`force=False` refuses an existing file)."""
+    out = Path(out)
+    with OutputSet.for_file(out, force=force) as files:
+        infos = []
+        files.write(out.name, lambda tmp: infos.append(render_file(clips, tmp, suffix=out.suffix, **options)))
+        files.commit()
+    return replace(infos[0], path=out)
+
+
+def render_file(
     clips: Sequence[BVH],
     out: str | Path,
     fps: float | None = None,
@@ -50,8 +60,10 @@ def render_preview(
     units: str | float = "auto",
     root: str | None = None,
     up: str | None = None,
+    suffix: str | None = None,
 ) -> RenderInfo:
-    """Render clips side by side (one panel each) to a .gif or .mp4.
+    """Render clips side by side (one panel each) to a .gif or .mp4 at `out` itself (a caller's temp
+    file: `suffix` overrides its format; render_preview writes atomically).
 
     `fps` overrides the clips' frame rate; playback runs at that rate, divided
     by the smallest whole number that brings it under the format's limit
@@ -59,9 +71,9 @@ def render_preview(
     the whole image in pixels (default 360 x 360 per panel). `root` and `up`
     override the joint the camera follows and the up axis (see stick_figure)."""
     out = Path(out)
-    suffix = out.suffix.lower()
+    suffix = (suffix or out.suffix).lower()
     if suffix not in FORMATS:
-        raise SinMDMError(f"cannot render '{out.suffix or out.name}' previews: use .gif or .mp4")
+        raise SinMDMError(f"cannot render '{suffix or out.name}' previews: use .gif or .mp4")
     if not clips:
         raise SinMDMError("no clips to preview")
     if labels is not None and len(labels) != len(clips):
@@ -82,7 +94,7 @@ def render_preview(
         raise SinMDMError(f"preview size {width}x{height} is too small")
     drawer = FrameDrawer(figures, times, (width, height), (columns, rows))
     if suffix == ".gif":
-        write_gif(out, drawer.frames(), rate, drawer.palette_inks)
+        write_gif(out, drawer.frames(), gif_durations_ms(len(times), rate), drawer.palette_inks)
     else:
         write_mp4(out, drawer.frames(), rate, (width, height))
     return RenderInfo(out, len(times), rate, (width, height))
@@ -296,30 +308,63 @@ def _ramp_palette(background: str, inks: Sequence[str], levels: int = 16):
     return palette
 
 
-def write_gif(out: Path, frames: Iterator[np.ndarray], rate: float, inks: Sequence[str]) -> None:
+def write_gif(out: Path, frames: Iterator[np.ndarray], durations_ms: Sequence[int], inks: Sequence[str]) -> None:
+    """Stream frames into `out`: only the previous frame is held, so memory does not grow with the length
+    (PIL's save_all keeps every frame). Each frame is stored as its changed rectangle; a frame equal to
+    the previous one extends that frame's delay instead."""
     image_module = import_extra("PIL.Image")
+    gif = import_extra("PIL.GifImagePlugin")
     palette = _ramp_palette(BACKGROUND, inks)
-    images = [image_module.fromarray(f).convert("RGB").quantize(palette=palette, dither=image_module.Dither.NONE) for f in frames]
-    with atomic_path(out) as tmp:
-        try:
-            images[0].save(tmp, format="GIF", save_all=True, append_images=images[1:],
-                           duration=gif_durations_ms(len(images), rate), loop=0, optimize=False)
-        except OSError as exc:
-            raise SinMDMError(f"cannot write {out}: {exc}") from None
+    try:
+        with open(out, "wb") as fh:
+            previous: np.ndarray | None = None
+            pending: tuple | None = None  # (image, offset, delay) of the frame not yet written
+            for frame, delay in zip(frames, durations_ms):
+                image = image_module.fromarray(frame).convert("RGB").quantize(palette=palette, dither=image_module.Dither.NONE)
+                indices = np.asarray(image)
+                if previous is None:
+                    header, _ = gif.getheader(image, info={"loop": 0, "duration": delay})
+                    fh.write(b"".join(header))
+                    pending = (image, (0, 0), delay)
+                else:
+                    box = _changed_box(previous, indices)
+                    if box is None:
+                        pending = (*pending[:2], pending[2] + delay)
+                        continue
+                    _write_gif_frame(fh, gif, *pending)
+                    pending = (image.crop(box), box[:2], delay)
+                previous = indices
+            if pending is not None:
+                _write_gif_frame(fh, gif, *pending)
+            fh.write(b";")
+    except OSError as exc:
+        raise SinMDMError(f"cannot write {out}: {exc.strerror or exc}") from None
+
+
+def _changed_box(previous: np.ndarray, current: np.ndarray) -> tuple[int, int, int, int] | None:
+    """(left, top, right, bottom) of the pixels that differ, None when none do."""
+    changed = previous != current
+    rows, columns = np.flatnonzero(changed.any(axis=1)), np.flatnonzero(changed.any(axis=0))
+    if not len(rows):
+        return None
+    return int(columns[0]), int(rows[0]), int(columns[-1]) + 1, int(rows[-1]) + 1
+
+
+def _write_gif_frame(fh, gif, image, offset: tuple[int, int], delay: int) -> None:
+    fh.write(b"".join(gif.getdata(image, offset=offset, duration=delay)))
 
 
 def write_mp4(out: Path, frames: Iterator[np.ndarray], rate: float, size: tuple[int, int]) -> None:
     imageio_ffmpeg = import_extra("imageio_ffmpeg")
-    with atomic_path(out) as tmp:
-        writer = imageio_ffmpeg.write_frames(
-            str(tmp), size, fps=rate, codec="libx264", pix_fmt_in="rgba", pix_fmt_out="yuv420p", quality=None, macro_block_size=2,
-            ffmpeg_log_level="error", output_params=["-crf", "23", "-preset", "veryfast", "-f", "mp4", "-movflags", "+faststart"],
-        )
-        try:
-            writer.send(None)
-            for frame in frames:
-                writer.send(np.ascontiguousarray(frame))
-        except (OSError, RuntimeError) as exc:
-            raise SinMDMError(f"cannot write {out}: {exc}") from None
-        finally:
-            writer.close()
+    writer = imageio_ffmpeg.write_frames(
+        str(out), size, fps=rate, codec="libx264", pix_fmt_in="rgba", pix_fmt_out="yuv420p", quality=None, macro_block_size=2,
+        ffmpeg_log_level="error", output_params=["-crf", "23", "-preset", "veryfast", "-f", "mp4", "-movflags", "+faststart"],
+    )
+    try:
+        writer.send(None)
+        for frame in frames:
+            writer.send(np.ascontiguousarray(frame))
+    except (OSError, RuntimeError) as exc:
+        raise SinMDMError(f"cannot write {out}: {exc}") from None
+    finally:
+        writer.close()

@@ -14,6 +14,7 @@ from __future__ import annotations
 import io
 import os
 import re
+import stat
 from dataclasses import dataclass
 
 import numpy as np
@@ -23,6 +24,12 @@ from .errors import BVHError, SinMDMError
 
 MAX_JOINTS = 10_000
 MAX_DEPTH = 1_000  # nested blocks (joints and End Sites); real rigs stay under ~100
+MAX_FILE_BYTES = 1 << 30
+# Frames times joints bounds the memory of a clip's animation (about 100 bytes each as
+# float64 matrices and translations): 20 M is an hour of a 90-joint rig at 60 fps.
+MAX_JOINT_FRAMES = 20_000_000
+MIN_FRAME_TIME, MAX_FRAME_TIME = 1e-4, 10.0  # seconds: 10,000 fps .. one frame per 10 s
+FLOAT32_MAX = float(np.finfo(np.float32).max)
 
 CHANNEL_NAMES = ("Xposition", "Yposition", "Zposition", "Xrotation", "Yrotation", "Zrotation")
 _CANONICAL_CHANNEL = {name.lower(): name for name in CHANNEL_NAMES}
@@ -198,12 +205,27 @@ def _name_list(names: tuple[str, ...], limit: int = 8) -> str:
 
 
 def read_bvh(path: str | os.PathLike) -> BVH:
+    name = os.fspath(path)
     try:
-        with open(path, "rb") as fh:
-            data = fh.read()
+        data = _read_regular_file(name)
     except OSError as exc:
-        raise SinMDMError(f"cannot read {os.fspath(path)}: {exc.strerror or exc}") from None
-    return parse_bvh(data, os.fspath(path))
+        raise SinMDMError(f"cannot read {name}: {exc.strerror or exc}") from None
+    return parse_bvh(data, name)
+
+
+def _read_regular_file(name: str) -> bytes:
+    """The bytes of a regular file of at most MAX_FILE_BYTES. Opened non-blocking, so a
+    FIFO is refused instead of waiting forever for a writer."""
+    with open(os.open(name, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0)), "rb") as fh:
+        info = os.fstat(fh.fileno())
+        if stat.S_ISDIR(info.st_mode):
+            raise SinMDMError(f"cannot read {name}: it is a directory")
+        if not stat.S_ISREG(info.st_mode):
+            raise SinMDMError(f"cannot read {name}: not a regular file (a pipe, device or socket)")
+        # st_size first, so a huge file is refused unread; the bounded read catches a growing one.
+        if info.st_size > MAX_FILE_BYTES or len(data := fh.read(MAX_FILE_BYTES + 1)) > MAX_FILE_BYTES:
+            raise SinMDMError(f"cannot read {name}: larger than the {MAX_FILE_BYTES >> 30} GiB a BVH file may have")
+    return data
 
 
 def parse_bvh(data: str | bytes, path: str = "<string>") -> BVH:
@@ -215,7 +237,7 @@ def parse_bvh(data: str | bytes, path: str = "<string>") -> BVH:
     tokens, motion_index = _hierarchy_tokens(lines)
     skeleton = _parse_hierarchy(tokens, motion_index, path)
     frames, frame_time, data_index = _parse_motion_header(lines, motion_index, path)
-    values = _parse_values(lines, data_index, frames, skeleton.num_channels, path)
+    values = _parse_values(lines, data_index, frames, skeleton, path)
     return BVH(skeleton, frame_time, values, None if path == "<string>" else path)
 
 
@@ -372,6 +394,8 @@ def _parse_hierarchy(tokens: list[tuple[int, str]], motion_index: int | None, pa
             offset = np.array(numbers)
             if not np.isfinite(offset).all():
                 raise fail(line, "NaN or infinite value in OFFSET")
+            if np.abs(offset).max() > FLOAT32_MAX:
+                raise fail(line, f"OFFSET value beyond the float32 range (+-{FLOAT32_MAX:.1e})")
             if block[0] == "end":
                 if end_sites[-1][1] is not None:
                     raise fail(line, f"second OFFSET in {describe(block)}")
@@ -476,10 +500,32 @@ def _parse_motion_header(lines: list[str], motion_index: int, path: str) -> tupl
                 raise BVHError(path, line_no, "NaN or infinite value in Frame Time")
             if frame_time <= 0:
                 raise BVHError(path, line_no, f"frame time must be > 0, got {value}")
+            if not MIN_FRAME_TIME <= frame_time <= MAX_FRAME_TIME:
+                raise BVHError(
+                    path, line_no,
+                    f"frame time {value} s is outside {MIN_FRAME_TIME:g} .. {MAX_FRAME_TIME:g} s "
+                    f"({1 / MAX_FRAME_TIME:g} .. {1 / MIN_FRAME_TIME:g} fps)",
+                )
         else:
             raise BVHError(path, line_no, f"expected a {missing} line after MOTION, got {_quote(content)}")
         index += 1
     return frames, frame_time, index
+
+
+def _check_frame_count(lines: list[str], data_index: int, frames: int, skeleton: Skeleton, path: str) -> None:
+    """Refuse a declared frame count the memory bound or the file itself cannot back."""
+    frames_line = _frames_line(lines, data_index)
+    if frames * skeleton.num_joints > MAX_JOINT_FRAMES:
+        raise BVHError(
+            path, frames_line,
+            f"{frames} frames of {skeleton.num_joints} joints is more than the {MAX_JOINT_FRAMES:,} "
+            "joint-frames a clip may have",
+        )
+    # Without channels a frame is an empty line: the file must still have one per frame.
+    if skeleton.num_channels == 0 and frames > len(lines) - data_index:
+        raise BVHError(
+            path, frames_line, f"declared {frames} frames but the file has {len(lines) - data_index} lines of motion"
+        )
 
 
 def _last_content_line(lines: list[str]) -> int:
@@ -489,7 +535,8 @@ def _last_content_line(lines: list[str]) -> int:
     return 1
 
 
-def _parse_values(lines: list[str], data_index: int, frames: int, channels: int, path: str) -> np.ndarray:
+def _parse_values(lines: list[str], data_index: int, frames: int, skeleton: Skeleton, path: str) -> np.ndarray:
+    channels = skeleton.num_channels
     data_lines = lines[data_index:]
     tokens = "\n".join(data_lines).split()
     try:
@@ -505,6 +552,10 @@ def _parse_values(lines: list[str], data_index: int, frames: int, channels: int,
     if not finite.all():
         bad = int(np.argmin(finite))
         raise BVHError(path, line_of(bad), f"NaN or infinite value {_quote(tokens[bad])}")
+    in_range = np.abs(flat) <= FLOAT32_MAX
+    if not in_range.all():
+        bad = int(np.argmin(in_range))
+        raise BVHError(path, line_of(bad), f"value {_quote(tokens[bad])} is beyond the float32 range (+-{FLOAT32_MAX:.1e})")
     frames_line = _frames_line(lines, data_index)
     expected = frames * channels
     if flat.size > expected:
@@ -529,6 +580,7 @@ def _parse_values(lines: list[str], data_index: int, frames: int, channels: int,
             frames_line,
             f"declared {frames} frames but found {full} full frames (data ends at line {line_of(flat.size - 1)})",
         )
+    _check_frame_count(lines, data_index, frames, skeleton, path)
     return flat.reshape(frames, channels)
 
 

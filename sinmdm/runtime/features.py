@@ -23,15 +23,19 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .animation import Animation, animation_from_bvh, animation_to_bvh, global_positions
-from .bvh import BVH, Skeleton
+from .bvh import BVH, MAX_FRAME_TIME, MAX_JOINT_FRAMES, MIN_FRAME_TIME, Skeleton
 from .contacts import contact_labels, default_contact_speed, detect_contact_joints
-from .errors import SinMDMError
-from .resample import resample_linear, resample_rotations
+from .errors import OptionError, SinMDMError
+from .options import check_number
+from .resample import resample_count, resample_linear, resample_rotations
 from .rig import AXIS_NAMES, analyse_rig, skeleton_extent as skeleton_size
 from .rotations import matrix_to_6d, matrix_to_quat, quat_to_matrix, sixd_to_matrix
 
 ROT6D = ("r00", "r01", "r02", "r10", "r11", "r12")
 UNIT_SCALES = {"m": 1.0, "cm": 0.01, "mm": 0.001, "in": 0.0254, "ft": 0.3048}
+MIN_SCALE, MAX_SCALE = 1e-6, 1e6  # metres per file unit
+MAX_METRES = 1e6  # no position of a character clip lies 1,000 km from the origin
+MAX_CLIP_SECONDS = 3600  # the longest clip, after resampling to the feature rate
 
 
 @dataclass(frozen=True)
@@ -100,14 +104,14 @@ def unit_scale(skeleton: Skeleton, units: str | float = "auto") -> float:
     """Metres per file unit. 'auto' guesses from the rest-pose size: characters
     are taken to be between a few centimetres and ~20 m tall."""
     if isinstance(units, (int, float)):
-        return float(units)
+        return _checked_scale(float(units))
     if units in UNIT_SCALES:
         return UNIT_SCALES[units]
     if units != "auto":
         try:
-            return float(units)
+            return _checked_scale(float(units))
         except ValueError:
-            raise SinMDMError(f"unknown units '{units}': use auto, m, cm, mm, in, ft or metres per unit") from None
+            raise OptionError("units", f"unknown units '{units}': use auto, m, cm, mm, in, ft or metres per unit") from None
     size = skeleton_size(skeleton)
     if size > 300:
         return 0.001
@@ -116,11 +120,38 @@ def unit_scale(skeleton: Skeleton, units: str | float = "auto") -> float:
     return 1.0
 
 
-def resample_animation(animation: Animation, fps: float, method: str = "slerp") -> Animation:
+def _checked_scale(scale: float) -> float:
+    return check_number("units", scale, MIN_SCALE, MAX_SCALE)
+
+
+def check_source_fps(source_fps: float) -> float:
+    """A frame rate inside the range the BVH reader accepts for a file's own frame time."""
+    return check_number("source_fps", source_fps, 1 / MAX_FRAME_TIME, 1 / MIN_FRAME_TIME)
+
+
+def _check_resampled_length(animation: Animation, fps: float, name: str) -> None:
+    """Refuse, before any work, a clip that resampling would turn into more than an
+    hour of frames: its frame rate is most likely wrong."""
+    count, joints = resample_count(animation.frames, animation.fps, fps), animation.skeleton.num_joints
+    if count > MAX_CLIP_SECONDS * fps + 1 or count * joints > MAX_JOINT_FRAMES:
+        raise OptionError(
+            "source_fps",
+            f"{name} at {animation.fps:g} fps would be {count:,} frames of {joints} joints at {fps:g} fps "
+            f"({count / fps / 3600:.1f} hours), over the limit of {MAX_CLIP_SECONDS // 3600} hour and "
+            f"{MAX_JOINT_FRAMES:,} joint-frames: if its frame rate is wrong, give the real one",
+        )
+
+
+def clip_name(clip: BVH | Animation) -> str:
+    return clip.path if isinstance(clip, BVH) and clip.path else "the clip"
+
+
+def resample_animation(animation: Animation, fps: float, method: str = "slerp", name: str = "the clip") -> Animation:
     """Change the frame rate: slerp rotations and interpolate translations, or
     ('drop') keep every k-th frame as the reference code did (integer ratios only)."""
     if abs(animation.fps - fps) < 1e-6 * fps:
         return animation
+    _check_resampled_length(animation, fps, name)
     if method == "drop":
         step = animation.fps / fps
         if abs(step - round(step)) > 1e-3 or round(step) < 1:
@@ -133,6 +164,28 @@ def resample_animation(animation: Animation, fps: float, method: str = "slerp") 
         resample_linear(animation.translations, animation.fps, fps),
         fps,
     )
+
+
+def clip_animation(clip: BVH | Animation, fps: float, method: str, source_fps: float | None = None,
+                   skeleton: Skeleton | None = None) -> Animation:
+    """A clip with at least one frame as an animation at `fps` (from `source_fps`, its real
+    rate, when given), checked against `skeleton` when given; errors name the clip."""
+    name = clip_name(clip)
+    if clip.frames == 0:
+        raise SinMDMError(f"{name} has no frames: a clip needs at least one frame of motion")
+    animation = animation_from_bvh(clip) if isinstance(clip, BVH) else clip
+    if skeleton is not None:
+        check_same_skeleton(skeleton, animation.skeleton)
+    if source_fps is not None:
+        animation = Animation(animation.skeleton, animation.rotations, animation.translations, check_source_fps(source_fps))
+    return resample_animation(animation, fps, method, name)
+
+
+def _check_metres(values: np.ndarray, name: str, scale: float) -> None:
+    if not np.all(np.abs(values) <= MAX_METRES):  # also refuses NaN
+        raise SinMDMError(
+            f"{name} has positions beyond {MAX_METRES:g} m at {scale:g} metres per unit: its units or values are wrong"
+        )
 
 
 def check_same_skeleton(expected: Skeleton, got: Skeleton, what: str = "clip") -> None:
@@ -167,6 +220,11 @@ class MotionCodec:
     layout: FeatureLayout = field(init=False, compare=False)
 
     def __post_init__(self) -> None:
+        joints = self.skeleton.num_joints
+        if np.shape(self.rest_translations) != (joints, 3):
+            raise ValueError(f"rest translations have shape {np.shape(self.rest_translations)}, expected ({joints}, 3)")
+        if self.rest_rotations is not None and np.shape(self.rest_rotations) != (joints, 3, 3):
+            raise ValueError(f"rest rotations have shape {np.shape(self.rest_rotations)}, expected ({joints}, 3, 3)")
         object.__setattr__(self, "layout", self._make_layout())
 
     def _make_layout(self) -> FeatureLayout:
@@ -219,15 +277,12 @@ class MotionCodec:
     # ------------------------------------------------------------------ encode
     def animation(self, clip: BVH | Animation, source_fps: float | None = None) -> Animation:
         """The clip as an animation on this codec's skeleton, at the codec's frame rate."""
-        animation = animation_from_bvh(clip) if isinstance(clip, BVH) else clip
-        check_same_skeleton(self.skeleton, animation.skeleton)
-        if source_fps is not None:
-            animation = Animation(animation.skeleton, animation.rotations, animation.translations, source_fps)
-        return resample_animation(animation, self.fps, self.resample)
+        return clip_animation(clip, self.fps, self.resample, source_fps, self.skeleton)
 
     def encode(self, clip: BVH | Animation, source_fps: float | None = None) -> np.ndarray:
         """(T, F) float32 features at the codec's frame rate."""
         animation = self.animation(clip, source_fps)
+        _check_metres(animation.translations * self.scale, clip_name(clip), self.scale)
         parts = []
         matrices = animation.rotations[:, self.rotation_joints]
         parts.append(matrix_to_6d(matrices).reshape(animation.frames, -1))
@@ -339,10 +394,8 @@ def build_codec(
     (a joint name) and `up` ('y' or 'z') override what rig.py detects."""
     skeleton = clip.skeleton
     scale = unit_scale(skeleton, units)
-    animation = animation_from_bvh(clip)
-    if source_fps is not None:
-        animation = Animation(skeleton, animation.rotations, animation.translations, source_fps)
-    animation = resample_animation(animation, fps, resample)
+    animation = clip_animation(clip, fps, resample, source_fps)
+    _check_metres(animation.translations * scale, clip_name(clip), scale)
     size = skeleton_size(skeleton) * scale
 
     rig = analyse_rig(animation, scale, root, up)

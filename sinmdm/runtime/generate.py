@@ -1,8 +1,8 @@
 """The embedding API: generate motions with a loaded model and write them.
 
-    from sinmdm.runtime import load_model, generate, GenerationRequest, write_bvh
+    from sinmdm.runtime import load_model, generate, SamplingOptions, write_bvh
     model = load_model("walk_w64.onnx")
-    result = generate(model, GenerationRequest(frames=300, count=4, seed=7))
+    result = generate(model, 300, SamplingOptions(count=4, seed=7))
     for seed, clip in zip(result.seeds, result.clips):
         write_bvh(f"walk_{seed}.bvh", clip)
 """
@@ -19,23 +19,8 @@ from .animation import animation_to_bvh
 from .bvh import BVH
 from .cleanup import cleanup_contacts
 from .model import MotionModel
-from .sampler import DEFAULT_STEPS, EDGE_MARGIN, Guide, cycle_displacement, fit_guide, sample_features
-
-
-@dataclass(frozen=True)
-class GenerationRequest:
-    frames: int
-    count: int = 1
-    seed: int = 0
-    sampler: str = "ddpm"
-    steps: int | None = DEFAULT_STEPS
-    eta: float = 0.0
-    hop: int | None = None
-    # a seamless cycle of `frames` frames (at least one window): the last frame flows into
-    # the first, the root moving by `GenerationResult.loop_displacement` per cycle
-    loop: bool = False
-    cleanup: bool = True  # pin the contact joints where the model predicts contacts (cleanup.py)
-    margin: int = EDGE_MARGIN  # frames sampled beyond each end and cut off (0: the paper's sampler)
+from .options import SamplingOptions
+from .sampler import Guide, cycle_displacement, fit_guide, sample_features
 
 
 @dataclass
@@ -44,34 +29,37 @@ class GenerationResult:
     clips: list[BVH]
     seeds: list[int]
     seconds: float
+    options: SamplingOptions  # as sampled: the model's defaults filled in
     loop_displacement: np.ndarray | None = None  # loops: (count, 2) root metres per cycle, codec.horizontal_axes
 
 
 def generate(
     model: MotionModel,
-    request: GenerationRequest,
+    frames: int,
+    options: SamplingOptions = SamplingOptions(),
+    *,
+    loop: bool = False,
     guide: Guide | None = None,
     start: np.ndarray | None = None,
     progress: Callable[[int, int], None] | None = None,
     adjust: Callable[[np.ndarray], np.ndarray] | None = None,
 ) -> GenerationResult:
-    """Sample `request.count` motions; clip i is reproducible alone with seed `request.seed + i`.
-    `adjust` maps the sampled (count, frames, F) features to the ones decoded and returned."""
+    """Sample `options.count` motions of `frames` frames; clip i is reproducible alone with
+    seed `options.seed + i`. `loop`: a seamless cycle of `frames` frames (at least one window),
+    the last frame flowing into the first, the root moving by `GenerationResult.loop_displacement`
+    per cycle. `adjust` maps the sampled (count, frames, F) features to the ones decoded and returned."""
     began = time.perf_counter()
-    features = sample_features(
-        model, request.frames, count=request.count, seed=request.seed, sampler=request.sampler,
-        steps=request.steps, eta=request.eta, hop=request.hop, guide=guide, progress=progress,
-        loop=request.loop, margin=request.margin,
-    )
+    options = options.resolve(model, frames)
+    features = sample_features(model, frames, options, guide=guide, progress=progress, loop=loop)
     if adjust is not None:
         features = adjust(features)
     origin = model.start_position if start is None else start
-    displacement = cycle_displacement(model.codec, features) if request.loop else None
+    displacement = cycle_displacement(model.codec, features) if loop else None
     keep = None if guide is None else guide.keep
-    clips = [decode_clip(model, f, origin, request.cleanup, None if displacement is None else displacement[i], keep)
+    clips = [decode_clip(model, f, origin, options.cleanup, None if displacement is None else displacement[i], keep)
              for i, f in enumerate(features)]
-    seeds = [request.seed + i for i in range(request.count)]
-    return GenerationResult(features, clips, seeds, time.perf_counter() - began, loop_displacement=displacement)
+    return GenerationResult(features, clips, options.seeds, time.perf_counter() - began, options,
+                            loop_displacement=displacement)
 
 
 def decode_clip(model: MotionModel, features: np.ndarray, start: np.ndarray | None, cleanup: bool = True,

@@ -12,6 +12,7 @@ import numpy as np
 from .errors import ModelError, SinMDMError
 from .features import MotionCodec
 from .model_format import INPUT_NAMES, METADATA_KEY, OUTPUT_NAME, decode_metadata
+from .options import check_whole
 
 DEMO_MODEL = Path(__file__).resolve().parent / "demo" / "stomper_w64.onnx"
 
@@ -86,18 +87,58 @@ class MotionModel:
         return self.denoisers[covering[0] if covering else self.windows[-1]]
 
 
-def _read_metadata(path: Path) -> tuple[dict, object]:
+MAX_THREADS = 256
+
+
+def _check_threads(threads: int | None) -> int | None:
+    return None if threads is None else check_whole("threads", threads, 1, MAX_THREADS)
+
+
+def _open_session(path: Path, options) -> object:
+    """The one InferenceSession of a file: the denoiser runs on it and its metadata is read from it."""
     import onnxruntime as ort
 
     if not path.is_file():
         raise SinMDMError(f"model file {path} does not exist")
     try:
-        session = ort.InferenceSession(str(path), providers=["CPUExecutionProvider"])
+        return ort.InferenceSession(str(path), sess_options=options, providers=["CPUExecutionProvider"])
     except Exception as exc:  # onnxruntime raises its own exception types for damaged files
         first_line = str(exc).strip().splitlines()[0][:160] if str(exc).strip() else type(exc).__name__
         raise ModelError(f"{path} is not a readable ONNX model ({first_line})") from None
-    props = session.get_modelmeta().custom_metadata_map
-    return decode_metadata(props.get(METADATA_KEY), str(path)), session
+
+
+def _read_codec(metadata: dict, path: Path) -> MotionCodec:
+    try:
+        return MotionCodec.from_dict(metadata["codec"])
+    except (KeyError, TypeError, ValueError, IndexError, SinMDMError) as exc:
+        raise ModelError(f"{path}: the skeleton or feature layout in its metadata is invalid ({exc})") from None
+
+
+def _check_graph(denoiser: OnnxDenoiser, features: int, timesteps: int) -> None:
+    """The graph must be what its metadata says: inputs (x_t, t), one output x0 of x_t's
+    shape (batch, features, window), and a denoiser: one probe at a middle timestep must
+    give finite values that are not its input returned unchanged."""
+    session, path, window = denoiser.session, denoiser.path, denoiser.window
+    inputs = [i.name for i in session.get_inputs()]
+    outputs = [o.name for o in session.get_outputs()]
+    if inputs != list(INPUT_NAMES) or outputs != [OUTPUT_NAME]:
+        raise ModelError(f"{path} has inputs {inputs} and outputs {outputs}, expected {list(INPUT_NAMES)} and {[OUTPUT_NAME]}")
+    expected = (features, window)
+    for what, node in (("input x_t", session.get_inputs()[0]), ("output x0", session.get_outputs()[0])):
+        declared = tuple(node.shape[1:]) if node.shape is not None else ()
+        if len(node.shape or ()) != 3 or any(isinstance(d, int) and d != e for d, e in zip(declared, expected)):
+            raise ModelError(f"{path}: its {what} has shape {node.shape}, but its metadata says (batch, {features}, {window})")
+    x_t = np.random.default_rng(0).standard_normal((1, features, window)).astype(np.float32)
+    try:
+        x0 = np.asarray(denoiser(x_t, np.array([timesteps // 2], dtype=np.float32)))
+    except Exception as exc:  # onnxruntime's own types: a graph that cannot run these shapes
+        raise ModelError(f"{path}: its graph does not run on (1, {features}, {window}) inputs ({str(exc).strip()[:160]})") from None
+    if x0.shape != x_t.shape:
+        raise ModelError(f"{path}: its graph returns shape {x0.shape} for an input of shape {x_t.shape}")
+    if not np.isfinite(x0).all():
+        raise ModelError(f"{path}: its graph returns NaN or infinite values")
+    if np.array_equal(x0, x_t):
+        raise ModelError(f"{path}: its graph returns its input unchanged: not a trained denoiser")
 
 
 def load_model(paths: list[str | os.PathLike] | str | os.PathLike | None = None, threads: int | None = None) -> MotionModel:
@@ -106,36 +147,28 @@ def load_model(paths: list[str | os.PathLike] | str | os.PathLike | None = None,
         paths = [DEMO_MODEL]
     if isinstance(paths, (str, os.PathLike)):
         paths = [paths]
-    import onnxruntime as ort
-
-    options = _session_options(threads)
+    options = _session_options(_check_threads(threads))
     first: dict | None = None
     denoisers: dict[int, OnnxDenoiser] = {}
     for raw in paths:
         path = Path(raw)
-        metadata, _ = _read_metadata(path)
+        session = _open_session(path, options)
+        metadata = decode_metadata(session.get_modelmeta().custom_metadata_map.get(METADATA_KEY), str(path))
         if first is None:
-            first = metadata
+            first, codec = metadata, _read_codec(metadata, path)
         elif metadata["model_id"] != first["model_id"]:
             raise ModelError(f"{path} belongs to another model than {Path(paths[0])}: windows of different models cannot be mixed")
-        window = int(metadata["window"])
+        window = metadata["window"]
         if window in denoisers:
             raise ModelError(f"{path} repeats window {window}")
-        session = ort.InferenceSession(str(path), sess_options=options, providers=["CPUExecutionProvider"])
-        inputs = [i.name for i in session.get_inputs()]
-        if inputs != list(INPUT_NAMES):
-            raise ModelError(f"{path} has inputs {inputs}, expected {list(INPUT_NAMES)}")
         denoisers[window] = OnnxDenoiser(path, window, session)
-    try:
-        codec = MotionCodec.from_dict(first["codec"])
-    except (KeyError, TypeError, ValueError) as exc:
-        raise ModelError(f"{Path(paths[0])}: the skeleton or feature layout in its metadata is invalid ({exc})") from None
+        _check_graph(denoisers[window], codec.width, len(first["alphas_cumprod"]))
     start = first.get("start_position") or [0.0, 0.0]
     return MotionModel(
         codec=codec,
         alphas_cumprod=np.asarray(first["alphas_cumprod"], dtype=np.float64),
-        receptive_field=int(first["receptive_field"]),
-        trained_window=int(first.get("trained_window", first["window"])),
+        receptive_field=first["receptive_field"],
+        trained_window=first.get("trained_window", first["window"]),
         denoisers=denoisers,
         metadata=first,
         start_position=np.asarray(start, dtype=np.float64),

@@ -1,28 +1,129 @@
-"""Writing a generation's outputs: every file of a command appears together or not at all."""
+"""Writing a generation's outputs: the sample files of a command appear together or not at all.
+
+Every check (names, directory, existing files, the writers an output needs) happens in
+`plan_sample_outputs`, before any sampling. The runtime does not import the preview package:
+GLB and GIF writers are handed in (the CLI's come from sinmdm/cli/writers.py)."""
 
 from __future__ import annotations
 
 import io
 import os
 from pathlib import Path
-from typing import Callable
+from typing import TYPE_CHECKING, Callable, Mapping, Sequence
 
 import numpy as np
 
-from .animation import animation_from_bvh, global_positions
-from .atomic import check_writable_dir
+from .atomic import OutputSet, check_plain_name
 from .bvh import BVH, format_bvh
-from .errors import SinMDMError
-from .generate import GenerationResult
-from .model import MotionModel
+from .errors import OptionError, SinMDMError
+
+if TYPE_CHECKING:
+    from .generate import GenerationResult
+    from .model import MotionModel
+
+FORMATS = ("bvh", "glb")
+PREVIEW_EXTRA = "pip install 'sinmdm[preview]'"
 
 
 def _npz_bytes(model: MotionModel, features: np.ndarray, clip: BVH) -> bytes:
+    from .animation import animation_from_bvh, global_positions
+
     buffer = io.BytesIO()
     positions = global_positions(animation_from_bvh(clip)) * model.codec.scale
     np.savez_compressed(buffer, features=features, positions_m=positions.astype(np.float32),
                         joints=np.array(clip.skeleton.names), fps=model.codec.fps)
     return buffer.getvalue()
+
+
+def _needed_writers(fmt: str, preview: bool, writers: Mapping[str, Callable] | None) -> dict[str, Callable]:
+    if fmt not in FORMATS:
+        raise OptionError("format", f"unknown format '{fmt}': use bvh or glb")
+    needed = {"glb": fmt == "glb", "gif": preview}
+    what = {"glb": "--format glb", "gif": "--preview"}
+    available = dict(writers or {})
+    for kind, wanted in needed.items():
+        if wanted and kind not in available:
+            raise SinMDMError(f"{what[kind]} needs the preview extra: {PREVIEW_EXTRA}")
+    return available
+
+
+class SampleOutputs:
+    """The planned files of one generation: samples (and .npz) as one set, the preview GIF as another."""
+
+    def __init__(self, samples: OutputSet, stems: list[str], fmt: str, npz: bool, preview: OutputSet | None,
+                 writers: dict[str, Callable]) -> None:
+        self.samples = samples
+        self.stems = stems
+        self.fmt = fmt
+        self.npz = npz
+        self.preview = preview
+        self.writers = writers
+        self.paths: list[Path] = samples.paths + (preview.paths if preview else [])
+
+    def __enter__(self) -> "SampleOutputs":
+        return self
+
+    def __exit__(self, *exc_info) -> None:
+        self.close()
+
+    def close(self) -> None:
+        self.samples.close()
+        if self.preview is not None:
+            self.preview.close()
+
+    def _write_clip(self, stem: str, clip: BVH) -> None:
+        if self.fmt == "bvh":
+            self.samples.write_text(f"{stem}.bvh", format_bvh(clip))
+        else:
+            self.samples.write(f"{stem}.glb", lambda tmp: self.writers["glb"](clip, tmp))
+
+    def write(self, model: MotionModel, result: GenerationResult) -> list[Path]:
+        """All sample files together or none; then the preview, so its failure never loses them."""
+        if len(result.clips) != len(self.stems):
+            raise ValueError(f"planned {len(self.stems)} samples, got {len(result.clips)}")
+        try:
+            with self.samples:
+                for stem, features, clip in zip(self.stems, result.features, result.clips):
+                    self._write_clip(stem, clip)
+                    if self.npz:
+                        self.samples.write_bytes(f"{stem}.npz", _npz_bytes(model, features, clip))
+                written = self.samples.commit()
+            if self.preview is not None:
+                written += self._write_preview(result.clips)
+        finally:
+            self.close()
+        return written
+
+    def _write_preview(self, clips: list[BVH]) -> list[Path]:
+        with self.preview as preview:
+            try:
+                preview.write(preview.names[0], lambda tmp: self.writers["gif"](clips, tmp))
+                return preview.commit()
+            except Exception as exc:  # the samples are safe: say so, whatever broke the preview
+                reason = str(exc) if isinstance(exc, SinMDMError) else f"{type(exc).__name__}: {exc}"
+                raise SinMDMError(f"the preview failed ({reason}); the {len(self.samples.paths)} sample "
+                                  f"file(s) were written to {self.samples.directory}") from None
+
+
+def plan_sample_outputs(
+    out_dir: str | os.PathLike,
+    name: str,
+    seeds: Sequence[int],
+    *,
+    fmt: str = "bvh",
+    npz: bool = False,
+    preview: bool = False,
+    force: bool = False,
+    writers: Mapping[str, Callable] | None = None,
+) -> SampleOutputs:
+    """Check every output of a generation before sampling: names, directory, existing files, writers."""
+    available = _needed_writers(fmt, preview, writers)
+    check_plain_name(name)
+    stems = [f"{name}_{seed:04d}" for seed in seeds]
+    names = [f"{stem}.{ext}" for stem in stems for ext in ([fmt, "npz"] if npz else [fmt])]
+    samples = OutputSet(out_dir, names, force=force)
+    gif = OutputSet(out_dir, [f"{name}_preview.gif"], force=force) if preview else None
+    return SampleOutputs(samples, stems, fmt, npz, gif, available)
 
 
 def write_outputs(
@@ -34,42 +135,9 @@ def write_outputs(
     npz: bool = False,
     preview: bool = False,
     force: bool = False,
+    writers: Mapping[str, Callable] | None = None,
 ) -> list[Path]:
-    """Write every clip (and extras); all files appear together or not at all."""
-    if fmt not in ("bvh", "glb"):
-        raise SinMDMError(f"unknown format '{fmt}': use bvh or glb")
-    directory = check_writable_dir(out_dir)
-    planned: list[tuple[Path, Callable[[Path], None]]] = []
-    for seed, features, clip in zip(result.seeds, result.features, result.clips):
-        stem = directory / f"{name}_{seed:04d}"
-        if fmt == "bvh":
-            text = format_bvh(clip)
-            planned.append((stem.with_suffix(".bvh"), lambda p, text=text: p.write_text(text, encoding="utf-8")))
-        else:
-            from ..preview.gltf import write_glb
-
-            planned.append((stem.with_suffix(".glb"), lambda p, clip=clip: write_glb(clip, p)))
-        if npz:
-            data = _npz_bytes(model, features, clip)
-            planned.append((stem.with_suffix(".npz"), lambda p, data=data: p.write_bytes(data)))
-    if preview:
-        from ..preview.render import render_preview
-
-        planned.append((directory / f"{name}_preview.gif", lambda p: render_preview(result.clips, p)))
-    existing = [str(p) for p, _ in planned if p.exists()]
-    if existing and not force:
-        raise SinMDMError(f"{existing[0]} exists; pass --force to overwrite (or choose another --out)")
-    temporary: list[tuple[Path, Path]] = []
-    try:
-        for path, write in planned:
-            tmp = path.with_name(f".{path.stem}.part{path.suffix}")  # writers choose the format by suffix
-            write(tmp)
-            temporary.append((tmp, path))
-        for tmp, path in temporary:
-            os.replace(tmp, path)
-    except OSError as exc:
-        raise SinMDMError(f"cannot write into {directory}: {exc.strerror}") from None
-    finally:
-        for tmp, _ in temporary:
-            tmp.unlink(missing_ok=True)
-    return [path for path, _ in planned]
+    """Write every clip (and extras); all sample files appear together or not at all."""
+    planned = plan_sample_outputs(out_dir, name, result.seeds, fmt=fmt, npz=npz, preview=preview, force=force,
+                                  writers=writers)
+    return planned.write(model, result)

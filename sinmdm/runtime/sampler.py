@@ -21,16 +21,11 @@ from typing import Callable
 
 import numpy as np
 
-from .errors import SinMDMError
+from .errors import OptionError, SinMDMError
 from .model import MotionModel
+from .options import DEFAULT_STEPS, EDGE_MARGIN, SAMPLERS, SamplingOptions  # noqa: F401 (re-exported)
 from .schedule import Schedule
 
-SAMPLERS = ("ddpm", "ddim")
-DEFAULT_STEPS = 50
-# Frames sampled beyond each end and cut off: a window's outermost frames are denoised
-# without context (the UNet's padding), and on short-trained models the first and last
-# 2-3 frames wobble (the height alternating by up to 16 cm). 0 is the paper's sampler.
-EDGE_MARGIN = 8
 HARMONIZE_STOP = 0.02  # ILVR guidance stops for the last 2 % of the schedule (t <= 20 of 1000)
 MAX_WINDOWS_PER_CALL = 256
 
@@ -119,7 +114,7 @@ class WindowedDenoiser:
         self.frames = frames if loop else max(frames, self.window)
         self.hop = hop or max(self.window // 2, 1)
         if not 1 <= self.hop <= self.window:
-            raise SinMDMError(f"hop must be between 1 and the window ({self.window}), got {self.hop}")
+            raise OptionError("hop", f"must be between 1 and the window ({self.window}), got {self.hop}")
         if loop:
             self.starts = circular_window_starts(self.frames, self.window, self.hop)
         else:
@@ -180,34 +175,24 @@ def fit_guide(array: np.ndarray | None, frames: int, before: int = 0) -> np.ndar
 def sample_features(
     model: MotionModel,
     frames: int,
-    count: int = 1,
-    seed: int = 0,
-    sampler: str = "ddpm",
-    steps: int | None = DEFAULT_STEPS,
-    eta: float = 0.0,
-    hop: int | None = None,
+    options: SamplingOptions = SamplingOptions(),
     guide: Guide | None = None,
     progress: Callable[[int, int], None] | None = None,
     loop: bool = False,
-    margin: int = 0,
 ) -> np.ndarray:
     """(count, frames, F) float32 motion features; with `loop`, a cycle of `frames`
-    frames (at least one window) whose last frame flows into its first. `margin`
+    frames (at least one window) whose last frame flows into its first. `options.margin`
     frames are sampled before and after the motion (guides extended by 'not kept')
-    and cut off; a loop has no ends and ignores it."""
+    and cut off; a loop has no ends and ignores it. A guide's reference may also be
+    (count, features, frames): one per sample."""
     if frames < 1:
         raise SinMDMError("the length must be at least 1 frame")
-    if count < 1:
-        raise SinMDMError("--count must be at least 1")
-    if sampler not in SAMPLERS:
-        raise SinMDMError(f"unknown sampler '{sampler}': use {' or '.join(SAMPLERS)}")
-    if steps is not None and not 1 <= steps <= len(model.alphas_cumprod):
-        raise SinMDMError(f"--steps must be between 1 and {len(model.alphas_cumprod)}")
     if loop and guide is not None:
-        raise SinMDMError("--loop cannot be combined with guides (applications): sample a loop without one")
-    if margin < 0:
-        raise SinMDMError(f"--margin must be at least 0, got {margin}")
-    margin = 0 if loop else margin
+        raise SinMDMError("loop cannot be combined with guides (applications): sample a loop without one")
+    options = options.resolve(model, frames)
+    count, seed, sampler, steps, eta = options.count, options.seed, options.sampler, options.steps, options.eta
+    margin = 0 if loop else options.margin
+    hop = options.hop
     denoise = WindowedDenoiser(model, frames + 2 * margin, hop, loop=loop)
     length = denoise.frames
     chain = Schedule.from_alphas_cumprod(model.alphas_cumprod, steps)

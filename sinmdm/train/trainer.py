@@ -15,17 +15,18 @@ import numpy as np
 import torch
 
 from .. import __version__
-from ..runtime.atomic import atomic_path, check_writable_dir, write_text_atomic
+from ..runtime.atomic import check_writable_dir, write_text_atomic
 from ..runtime.bvh import BVH, read_bvh
 from ..runtime.errors import SinMDMError
 from ..runtime.features import MotionCodec, build_codec
 from ..runtime.schedule import NUM_TIMESTEPS
-from .checkpoint import CONFIG, LOG, RUN_FORMAT, file_sha256, load_config, load_state, save_run
+from .checkpoint import (BEST, CHECKSUMS, CONFIG, LOG, RUN_FORMAT, STAGE_PREFIX, file_sha256, load_best, load_config,
+                         load_state, log_records, nonfinite_tensor, save_run)
 from .data import BatchSampler
 from .diffusion import GaussianDiffusion
 from .model import Denoiser, ModelConfig, count_parameters, receptive_field
 from .presets import TrainConfig
-from .watch import BEST, COPYING, PEAKED, QualityWatch, WatchState, sampling_defaults
+from .watch import COPYING, PEAKED, QualityWatch, WatchState, sampling_defaults
 
 
 def resolve_device(name: str = "auto") -> torch.device:
@@ -119,6 +120,8 @@ class Run:
         self.sampling: dict | None = None  # sampling defaults measured on the kept weights
         self.loss = float("nan")
         self.elapsed = 0.0
+        self.checksums: dict[str, str] = {}  # sha256 of the weights files the run's config names
+        self.saved_step = 0
         self.autocast = config.bf16 and bf16_supported(device)
 
     # ------------------------------------------------------------- state
@@ -162,6 +165,14 @@ class Run:
         self.stopped = state.get("stopped")
         self.sampling = state.get("sampling")
 
+    def nonfinite_weight(self) -> str | None:
+        modules = [self.model] + ([self.ema] if self.ema is not None else [])
+        return next(filter(None, (nonfinite_tensor(m.state_dict()) for m in modules)), None)
+
+    def diverged(self, what: str) -> SinMDMError:
+        return SinMDMError(f"training diverged at step {self.step}: {what}; the last good checkpoint "
+                           f"(step {self.saved_step}) is kept")
+
     @property
     def finished(self) -> bool:
         return self.step >= self.config.steps or self.stopped is not None
@@ -190,6 +201,7 @@ class Run:
             "watch": None if not self.config.check_every else {
                 **self.watch.to_dict(), "stopped": self.stopped, "check_every": self.config.check_every},
             "sampling": self.sampling,
+            CHECKSUMS: self.checksums,
             "updated": datetime.now(timezone.utc).isoformat(timespec="seconds"),
         }
 
@@ -234,18 +246,27 @@ def _compatible(previous: dict, run: Run) -> None:
 
 
 def _trim_log(run_dir: Path, step: int) -> None:
-    """Drop log lines written after the checkpoint we resume from."""
-    path = run_dir / LOG
-    if not path.exists():
-        return
-    kept = []
-    for line in path.read_text(encoding="utf-8").splitlines():
-        try:
-            if json.loads(line).get("step", 0) <= step:
-                kept.append(line)
-        except json.JSONDecodeError:
-            break  # a line cut by a kill
-    write_text_atomic(path, "".join(k + "\n" for k in kept))
+    """Drop log lines written after the checkpoint we resume from (and lines that are not records)."""
+    if (run_dir / LOG).exists():
+        kept = [line for line, record in log_records(run_dir) if record["step"] <= step]
+        write_text_atomic(run_dir / LOG, "".join(line + "\n" for line in kept))
+
+
+def _refuse_finished(run_dir: Path, previous: dict, run: Run) -> None:
+    """A resumed run must have steps left: a finished run continues only when --steps raises its total."""
+    if run.stopped and (_second_stage(run) is None or "stage" in previous):
+        raise SinMDMError(f"{run_dir} is finished: the quality watch stopped it at step {run.step} "
+                          f"({run.stopped.split(':')[0]}); train a new run to change its budget")
+    if not run.stopped and run.step >= run.config.steps:
+        where = "is finished" if previous["finished"] else f"is past --steps {run.config.steps}"
+        raise SinMDMError(f"{run_dir} {where} at step {run.step}: pass --steps above {run.step} to train further")
+
+
+def resumed_budget(run_dir: Path, config: TrainConfig) -> TrainConfig:
+    """`config` with the run's own budget (steps, early stop), for a resume without --steps:
+    the run continues to the total it was started with, not the preset's."""
+    previous = TrainConfig.from_dict(load_config(Path(run_dir))["train"])
+    return replace(config, steps=previous.steps, early_stop=previous.early_stop)
 
 
 def train(
@@ -267,28 +288,44 @@ def train(
     has_run = (run_dir / CONFIG).exists()
     if has_run and not resume:
         raise SinMDMError(f"{run_dir} already holds a run: pass --resume to continue it, or choose another --out")
+    if resume and not has_run:
+        raise SinMDMError(f"--resume: {run_dir} holds no run to continue (no {CONFIG})")
     clip = load_clip(Path(clip_path), config.fps, codec_options)
     run = Run(clip, config, seed, resolve_device(device))
     if has_run:
         previous = load_config(run_dir)
         _compatible(previous, run)
         run.load_state(load_state(run_dir))
+        _refuse_finished(run_dir, previous, run)
+        run.checksums, run.saved_step = previous.get(CHECKSUMS) or {}, run.step
+        if not run.stopped:
+            run.sampling = None  # measured again at the new end
         _trim_log(run_dir, run.step)
     check_writable_dir(run_dir)
 
-    def checkpoint() -> None:
-        save_run(run_dir, run.config_dict(finished=run.finished), run.state())
+    def checkpoint(best: dict | None = None) -> None:
+        bad = run.nonfinite_weight()
+        if bad is not None:
+            raise run.diverged(f"non-finite weights ({bad})")
+        run.checksums = save_run(run_dir, run.config_dict(finished=run.finished), run.state(), best)
+        run.saved_step = run.step
 
     watch = _quality_watch(run) if config.check_every else None
     if not has_run:
         checkpoint()
+    if on_progress:
+        on_progress(run.step, config.steps, run.loss, 0.0)  # everything checked: training starts
     log = open(run_dir / LOG, "a", encoding="utf-8")
     losses: list[float] = []
     started, started_step = time.perf_counter(), run.step
+    best = None  # a best check not saved yet
     try:
         while not run.finished:
             tick = time.perf_counter()
-            losses.append(run.train_step())
+            loss = run.train_step()
+            if not math.isfinite(loss):
+                raise run.diverged(f"non-finite loss ({loss})")
+            losses.append(loss)
             run.elapsed += time.perf_counter() - tick
             if run.step % config.log_every == 0 or run.step == config.steps:
                 run.loss = float(np.mean(losses))
@@ -301,16 +338,15 @@ def train(
                 if on_progress:
                     on_progress(run.step, config.steps, run.loss, rate)
             checked = watch is not None and (run.step % config.check_every == 0 or run.step == config.steps)
-            if checked:
-                _check(run, watch, run_dir, log, on_check)
+            best = _check(run, watch, log, on_check) if checked else None
             if run.finished and watch is not None and run.sampling is None:
-                run.sampling = sampling_defaults(watch, _kept_weights(run, run_dir), run.device)
+                run.sampling = sampling_defaults(watch, _kept_weights(run, run_dir, best), run.device)
                 log.write(json.dumps({"step": run.step, "sampling": run.sampling}) + "\n")
                 log.flush()
             if checked or run.step % config.checkpoint_every == 0 or run.finished:
-                checkpoint()
+                checkpoint(best)
     except KeyboardInterrupt:
-        checkpoint()
+        checkpoint(best)
         raise
     finally:
         log.close()
@@ -331,16 +367,15 @@ def train(
         if on_check:
             on_check(offset + step, scores, offset + best_step)
 
-    stage = train(clip_path, stage_dir, second, seed=seed, device=device, resume=(stage_dir / CONFIG).exists(),
-                  codec_options=codec_options, on_progress=stage_progress, on_check=stage_check)
+    stage_done = (stage_dir / CONFIG).exists() and load_config(stage_dir)["finished"]
+    stage = load_config(stage_dir) if stage_done else train(
+        clip_path, stage_dir, second, seed=seed, device=device, resume=(stage_dir / CONFIG).exists(),
+        codec_options=codec_options, on_progress=stage_progress, on_check=stage_check)
     first_best, stage_best = (run.watch.best or {}).get("balance", -1.0), (stage["watch"]["best"] or {}).get("balance", -1.0)
     result["stage"] = {"dir": stage_dir.name, "norm": second.norm, "steps": stage["step"], "from_step": offset,
                        "best": stage["watch"]["best"], "chosen": stage_best > first_best}
     write_text_atomic(run_dir / CONFIG, json.dumps(result, indent=2) + "\n")
     return result
-
-
-STAGE_PREFIX = "norm-"  # the folder of a run's second stage, inside the run
 
 
 def kept_stage(run_dir: Path, config: dict) -> dict | None:
@@ -373,15 +408,16 @@ def _quality_watch(run: Run) -> QualityWatch:
                         run.receptive_field, run.clip.start, source_fps=run.clip.info["source_fps"])
 
 
-def _check(run: Run, watch: QualityWatch, run_dir: Path, log, on_check) -> None:
-    """Score the EMA weights; keep them as best.pt when they balance best; stop when the
-    watch says the run has peaked (unless the budget was forced)."""
+def _check(run: Run, watch: QualityWatch, log, on_check) -> dict | None:
+    """Score the EMA weights; return them (for best.pt, saved with the checkpoint that
+    follows) when they balance best; stop when the watch says the run has peaked (unless
+    the budget was forced)."""
     tick = time.perf_counter()
     weights = run.ema if run.ema is not None else run.model
     scores = watch.check(weights, run.device)
+    best = None
     if run.watch.update(run.step, scores):
-        with atomic_path(run_dir / BEST) as tmp:
-            torch.save({"step": run.step, "weights": weights.state_dict(), "scores": scores}, tmp)
+        best = {"step": run.step, "weights": copy.deepcopy(weights.state_dict()), "scores": scores}
     reason = run.watch.should_stop(run.config.patience, scores) if run.config.early_stop else None
     if reason == PEAKED:
         run.stopped = f"{PEAKED}: the balance peaked in the band at step {run.watch.best_step}"
@@ -394,25 +430,18 @@ def _check(run: Run, watch: QualityWatch, run_dir: Path, log, on_check) -> None:
     log.flush()
     if on_check:
         on_check(run.step, scores, run.watch.best_step)
+    return best
 
 
-def _kept_weights(run: Run, run_dir: Path) -> torch.nn.Module:
-    """The weights export will use: best.pt's when the watch kept some."""
+def _kept_weights(run: Run, run_dir: Path, best: dict | None) -> torch.nn.Module:
+    """The weights export will use: the best check's (`best`, not saved yet, or best.pt)
+    when the watch kept some."""
     model = copy.deepcopy(run.ema if run.ema is not None else run.model)
-    if (run_dir / BEST).exists():
+    if best is not None:
+        model.load_state_dict(best["weights"])
+    elif (run_dir / BEST).exists():
         model.load_state_dict(load_best(run_dir)["weights"])
     return model
-
-
-def load_best(run_dir: Path) -> dict:
-    path = Path(run_dir) / BEST
-    try:
-        best = torch.load(path, map_location="cpu", weights_only=True)
-    except Exception as exc:  # torch raises many types for a damaged file
-        raise SinMDMError(f"{path} is corrupted or unreadable ({type(exc).__name__})") from None
-    if not isinstance(best, dict) or "weights" not in best or "step" not in best:
-        raise SinMDMError(f"{path} is incomplete")
-    return best
 
 
 CHECKPOINTS = ("best", "last")
