@@ -17,15 +17,15 @@ import torch
 from sinmdm.runtime.atomic import temp_name
 from sinmdm.train.checkpoint import CHECKPOINT, CONFIG, LOG
 
-from .conftest import DEMO_CLIP, TINY_TRAIN_ARGS, run_cli
+from .conftest import DEMO_CLIP, TINY_TRAIN_ARGS, call_cli
 
 
 def resume(run_dir: Path, *args: str) -> subprocess.CompletedProcess:
-    return run_cli("sinmdm", "train", str(DEMO_CLIP), "--out", str(run_dir), "--resume", *args, *TINY_TRAIN_ARGS)
+    return call_cli("sinmdm", "train", str(DEMO_CLIP), "--out", str(run_dir), "--resume", *args, *TINY_TRAIN_ARGS)
 
 
 def export(run_dir: Path, out: Path, *args: str) -> subprocess.CompletedProcess:
-    return run_cli("sinmdm", "export", str(run_dir), "--out", str(out), *args)
+    return call_cli("sinmdm", "export", str(run_dir), "--out", str(out), *args)
 
 
 def assert_one_line_error(result: subprocess.CompletedProcess, *words: str, alone: bool = True) -> None:
@@ -177,7 +177,7 @@ def test_resume_of_a_finished_run(run):
 ])
 def test_damaged_config_is_one_line_error(run, damage, words):
     (run / CONFIG).write_text(json.dumps(damage(json.loads((run / CONFIG).read_text()))))
-    assert_one_line_error(run_cli("sinmdm", "info", str(run)), str(run / CONFIG), *words)
+    assert_one_line_error(call_cli("sinmdm", "info", str(run)), str(run / CONFIG), *words)
 
 
 def test_config_without_clip_refused_by_resume_and_export(run, tmp_path):
@@ -191,7 +191,7 @@ def test_config_without_clip_refused_by_resume_and_export(run, tmp_path):
 def test_damaged_log_records_are_skipped(run):
     log = run / LOG
     log.write_bytes(log.read_bytes() + b"\xff\xfe not utf-8\n[1, 2]\n{\"step\": 3, \"check\": [1]}\n\"text\"\n")
-    assert run_cli("sinmdm", "info", str(run)).returncode == 0
+    assert call_cli("sinmdm", "info", str(run)).returncode == 0
     result = resume(run, "--steps", "12")
     assert result.returncode == 0, result.stderr
     assert [json.loads(line)["step"] for line in log.read_text().splitlines()] == [10, 3, 12]

@@ -12,7 +12,7 @@ from sinmdm.runtime import SamplingOptions, load_model
 from sinmdm.runtime.applications import harmonize, load_reference, parse_frame_range
 from sinmdm.runtime.errors import OptionError
 
-from .conftest import DEMO_CLIP, real_clip, run_cli
+from .conftest import DEMO_CLIP, call_cli, real_clip, run_cli
 
 QUICK = ("--steps", "2")
 EDITS = ("inbetween", "expand", "keyframes", "control", "harmonize")
@@ -26,7 +26,7 @@ def assert_one_line_error(result, flag: str) -> None:
 
 def run_bad(tmp_path, *args: str):
     out = tmp_path / "out"
-    result = run_cli("sinmdm-run", *args, *QUICK, "--out", str(out))
+    result = call_cli("sinmdm-run", *args, *QUICK, "--out", str(out))
     assert not out.exists() or not any(out.iterdir())
     return result
 
@@ -80,7 +80,7 @@ def test_reference_with_a_wrong_frame_rate_needs_source_fps(tmp_path):
     clip = real_clip("Joe_traj-example.bvh")  # Frame Time 1 s: a 30 fps file
     result = run_bad(tmp_path, "control", "--trajectory", "--ref", str(clip))
     assert_one_line_error(result, "--source-fps")
-    run_cli("sinmdm-run", "control", "--trajectory", "--ref", str(clip), "--source-fps", "30", *QUICK,
+    call_cli("sinmdm-run", "control", "--trajectory", "--ref", str(clip), "--source-fps", "30", *QUICK,
             "--out", str(tmp_path / "ok"), check=True)
     assert len(list((tmp_path / "ok").glob("control_0000.bvh"))) == 1
 
@@ -102,8 +102,8 @@ def test_crowd_sample_reproduces_alone(tmp_path, command, extra):
     """Sample 7 of a crowd seeded 5 is byte-identical to a single run seeded 7 (partial
     harmonization included: each sample's base motion uses its own seed)."""
     args = ["sinmdm-run", command, "--ref", str(DEMO_CLIP), *extra, *QUICK]
-    run_cli(*args, "--count", "3", "--seed", "5", "--out", str(tmp_path / "crowd"), check=True)
-    run_cli(*args, "--seed", "7", "--out", str(tmp_path / "one"), check=True)
+    call_cli(*args, "--count", "3", "--seed", "5", "--out", str(tmp_path / "crowd"), check=True)
+    call_cli(*args, "--seed", "7", "--out", str(tmp_path / "one"), check=True)
     name = f"{command}_0007.bvh"
     assert (tmp_path / "crowd" / name).read_bytes() == (tmp_path / "one" / name).read_bytes()
 
@@ -138,14 +138,14 @@ def test_outputs_are_checked_before_sampling(tmp_path):
     crowd = ["sinmdm-run", "sample", "--count", "2000", "--frames", "2000"]
     (tmp_path / "taken").mkdir()
     (tmp_path / "taken" / "sample_0000.bvh").write_text("mine")
-    result = run_cli(*crowd, "--out", str(tmp_path / "taken"))
+    result = call_cli(*crowd, "--out", str(tmp_path / "taken"))
     assert_one_line_error(result, "--force")
     assert (tmp_path / "taken" / "sample_0000.bvh").read_text() == "mine"
     (tmp_path / "file").write_text("")
-    assert_one_line_error(run_cli(*crowd, "--out", str(tmp_path / "file" / "sub")), "file")
-    assert_one_line_error(run_cli(*crowd, "--name", "/abs", "--out", str(tmp_path / "o")), "--name")
+    assert_one_line_error(call_cli(*crowd, "--out", str(tmp_path / "file" / "sub")), "file")
+    assert_one_line_error(call_cli(*crowd, "--name", "/abs", "--out", str(tmp_path / "o")), "--name")
     edit = ["sinmdm-run", "expand", "--ref", str(DEMO_CLIP), "--count", "2000"]
-    assert_one_line_error(run_cli(*edit, "--name", "a/b", "--out", str(tmp_path / "o")), "--name")
+    assert_one_line_error(call_cli(*edit, "--name", "a/b", "--out", str(tmp_path / "o")), "--name")
 
 
 @pytest.mark.skipif(os.geteuid() == 0, reason="root writes anywhere")
@@ -154,7 +154,7 @@ def test_unwritable_out_fails_before_sampling(tmp_path):
     locked.mkdir()
     locked.chmod(0o500)
     try:
-        result = run_cli("sinmdm-run", "sample", "--count", "2000", "--frames", "2000", "--out", str(locked))
+        result = call_cli("sinmdm-run", "sample", "--count", "2000", "--frames", "2000", "--out", str(locked))
         assert_one_line_error(result, str(locked))
     finally:
         locked.chmod(0o700)
@@ -163,7 +163,7 @@ def test_unwritable_out_fails_before_sampling(tmp_path):
 def test_convert_force_onto_a_directory_is_one_line(tmp_path):
     target = tmp_path / "dir.bvh"
     target.mkdir()
-    result = run_cli("sinmdm-run", "convert", str(DEMO_CLIP), str(target), "--force")
+    result = call_cli("sinmdm-run", "convert", str(DEMO_CLIP), str(target), "--force")
     assert result.returncode == 2 and len(result.stderr.splitlines()) == 1 and result.stderr.startswith("error: ")
     assert target.is_dir() and not any(target.iterdir())
 
