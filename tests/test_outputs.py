@@ -17,7 +17,7 @@ from sinmdm.runtime.atomic import OutputSet, atomic_path, check_writable_dir, wr
 from sinmdm.runtime.errors import OptionError, SinMDMError
 from sinmdm.runtime.outputs import plan_sample_outputs, write_outputs
 
-from .conftest import DEMO_CLIP, run_cli
+from .conftest import DEMO_CLIP, call_cli, run_cli
 
 SAMPLE = Path(sys.executable).parent / "sinmdm-run"
 
@@ -364,3 +364,27 @@ def test_runtime_outputs_do_not_load_the_preview_package():
     result = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=60)
     assert result.returncode == 0, result.stderr
     assert result.stdout.strip() == "[]"
+
+
+def test_a_missing_preview_extra_is_reported_before_sampling(tmp_path):
+    blocker = tmp_path / "block_preview"
+    for package in ("matplotlib", "PIL"):
+        (blocker / package).mkdir(parents=True)
+        (blocker / package / "__init__.py").write_text(f"raise ImportError('{package} is blocked in this test')\n")
+    out = tmp_path / "out"
+    # a crowd that would sample for minutes: the refusal must come first
+    result = run_cli("sinmdm-run", "sample", "--count", "200", "--frames", "3000", "--preview", "--out", str(out),
+                     env={"PYTHONPATH": str(blocker)})
+    assert result.returncode == 2 and result.stderr.count("\n") == 1, result.stderr
+    assert "--preview needs the preview extra" in result.stderr
+    assert not out.exists() or not any(out.iterdir())
+
+
+def test_a_crowd_larger_than_the_free_space_is_refused_before_sampling(tmp_path):
+    free = os.statvfs(tmp_path).f_bavail * os.statvfs(tmp_path).f_frsize
+    frames = 100_000  # 55 minutes at the demo's 30 fps: under the length cap
+    count = min(10_000, free // (frames * 12 * 10) + 1)  # at least 10 channels of 12 bytes each
+    result = call_cli("sinmdm-run", "sample", "--count", str(count), "--frames", str(frames),
+                      "--out", str(tmp_path / "out"))
+    assert result.returncode == 2 and "not enough space" in result.stderr, result.stderr
+    assert not any((tmp_path / "out").iterdir())

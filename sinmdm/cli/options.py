@@ -125,7 +125,8 @@ def _run_sampling(command: str, body: Callable[..., Job], own: dict, *, models, 
     job = body(Context(model, options, force), **own)
     resolved = options.resolve(model, job.frames)
     with plan_sample_outputs(out, name, options.seeds, fmt=fmt, npz=npz, preview=preview, force=force,
-                             writers=extra_writers(fmt, preview)) as outputs:
+                             writers=extra_writers(fmt, preview),
+                             values_per_sample=job.frames * model.codec.skeleton.num_channels) as outputs:
         with _progress(f"{command}: {count} x {job.frames} frames") as progress:
             task = progress.add_task(command, total=resolved.steps)
             result = job.run(lambda done, total: progress.update(task, completed=done, total=total))

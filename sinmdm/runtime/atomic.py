@@ -22,6 +22,9 @@ TEMP_NAME = re.compile(r"^\.(?P<name>.+)\.(?P<pid>\d+)\.[0-9a-f]{12}\.part(\.[^.
 PROBE_NAME = "write-check"
 NAME_MAX = 255  # bytes in one file name on Linux, macOS and Windows file systems
 SIGNALS_HELD_DURING_RENAME = {signal.SIGINT, signal.SIGTERM}
+# Windows has neither: there a temp is still created exclusively, and renames run unmasked.
+NOFOLLOW = getattr(os, "O_NOFOLLOW", 0)
+CAN_MASK_SIGNALS = hasattr(signal, "pthread_sigmask")
 
 
 def temp_name(name: str) -> str:
@@ -30,12 +33,14 @@ def temp_name(name: str) -> str:
 
 def _create_exclusive(path: Path) -> None:
     """Create an empty file that did not exist, never through a link (mode 0666 less the umask)."""
-    flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW | getattr(os, "O_CLOEXEC", 0)
+    flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | NOFOLLOW | getattr(os, "O_CLOEXEC", 0)
     os.close(os.open(path, flags, 0o666))
 
 
 def _fsync_path(path: Path, directory: bool = False) -> None:
-    flags = os.O_RDONLY | (os.O_DIRECTORY if directory else os.O_NOFOLLOW)
+    if directory and os.name == "nt":  # Windows cannot open a directory to sync it (NTFS renames are journaled)
+        return
+    flags = os.O_RDONLY | (os.O_DIRECTORY if directory else NOFOLLOW)
     fd = os.open(path, flags)
     try:
         os.fsync(fd)
@@ -271,7 +276,7 @@ class OutputSet:
         if not self.force:
             for path in self.paths:
                 _check_target(path, force=False)  # another process may have written it meanwhile
-        held = signal.pthread_sigmask(signal.SIG_BLOCK, SIGNALS_HELD_DURING_RENAME)
+        held = signal.pthread_sigmask(signal.SIG_BLOCK, SIGNALS_HELD_DURING_RENAME) if CAN_MASK_SIGNALS else None
         try:
             for name, path in zip(self.names, self.paths):
                 os.replace(self._temps[name], path)
@@ -280,7 +285,8 @@ class OutputSet:
         except OSError as exc:
             raise SinMDMError(f"cannot write into {self.directory}: {exc.strerror}") from None
         finally:
-            signal.pthread_sigmask(signal.SIG_SETMASK, held)
+            if held is not None:
+                signal.pthread_sigmask(signal.SIG_SETMASK, held)
             self.close()
         return list(self.paths)
 

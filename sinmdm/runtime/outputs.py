@@ -22,6 +22,7 @@ if TYPE_CHECKING:
     from .model import MotionModel
 
 FORMATS = ("bvh", "glb")
+BVH_BYTES_PER_VALUE = 12  # "%.6f" and a space: a BVH's size is about this per channel and frame
 PREVIEW_EXTRA = "pip install 'sinmdm[preview]'"
 
 
@@ -115,13 +116,16 @@ def plan_sample_outputs(
     preview: bool = False,
     force: bool = False,
     writers: Mapping[str, Callable] | None = None,
+    values_per_sample: int = 0,
 ) -> SampleOutputs:
-    """Check every output of a generation before sampling: names, directory, existing files, writers."""
+    """Check every output of a generation before sampling: names, directory, existing files, writers,
+    and free space for `values_per_sample` (frames x channels) BVH values of each sample."""
     available = _needed_writers(fmt, preview, writers)
     check_plain_name(name)
     stems = [f"{name}_{seed:04d}" for seed in seeds]
     names = [f"{stem}.{ext}" for stem in stems for ext in ([fmt, "npz"] if npz else [fmt])]
-    samples = OutputSet(out_dir, names, force=force)
+    estimate = len(stems) * values_per_sample * BVH_BYTES_PER_VALUE
+    samples = OutputSet(out_dir, names, force=force, estimate_bytes=estimate)
     gif = OutputSet(out_dir, [f"{name}_preview.gif"], force=force) if preview else None
     return SampleOutputs(samples, stems, fmt, npz, gif, available)
 
