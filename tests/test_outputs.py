@@ -243,6 +243,15 @@ def test_cli_sample_on_a_full_disk(tmp_path):
     assert os.listdir(out) == []
 
 
+def test_cli_convert_on_a_full_disk(tmp_path):
+    target = tmp_path / "out" / "clip.bvh"
+    result = subprocess.run([str(SAMPLE), "convert", str(DEMO_CLIP), str(target)], capture_output=True, text=True,
+                            preexec_fn=limited_fsize(10_000), timeout=120)
+    assert result.returncode == 2, result.stderr
+    assert result.stderr.startswith("error: cannot write") and result.stderr.count("\n") == 1, result.stderr
+    assert "clip.bvh" in result.stderr and os.listdir(target.parent) == []
+
+
 def _sample_until_a_temp_exists(out: Path, *args: str) -> subprocess.Popen:
     """Start `sinmdm-run sample` and return once one of its temp files exists in `out`."""
     process = subprocess.Popen([str(SAMPLE), "sample", "--out", str(out), "--steps", "2", *args],
