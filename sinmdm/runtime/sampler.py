@@ -1,6 +1,8 @@
-"""Sampling: the DDPM loop (faithful: 1000 steps), respaced DDPM and DDIM, any
-length from fixed windows, and the hooks the applications use (a composition
-mask applied to x0_hat, ILVR harmonization applied to x_t).
+"""Sampling, shaped like k-diffusion's: a schedule (`Schedule`: respacing, the DDPM and
+DDIM updates, q_sample), a denoiser callable `denoise(x_t, t) -> x0_hat` (for a model:
+`WindowedDenoiser`, overlapping fixed windows blended into any length) and one loop
+(`sample_loop`) with the applications' hooks (a composition mask applied to x0_hat,
+ILVR harmonization applied to x_t). The faithful sampler is DDPM over all 1000 steps.
 
 Arrays are (samples, features, frames). Each sample has its own random stream
 (seed + i), so any sample of a crowd reproduces on its own.
@@ -172,6 +174,60 @@ def fit_guide(array: np.ndarray | None, frames: int, before: int = 0) -> np.ndar
     return np.concatenate([array, pad], axis=-1)
 
 
+Denoise = Callable[[np.ndarray, int], np.ndarray]  # (x_t (N, F, T), original timestep) -> x0_hat
+
+
+def draw(streams: list[np.random.Generator], shape: tuple[int, ...]) -> np.ndarray:
+    """One standard normal array per sample, each from its own stream: (N, *shape)."""
+    return np.stack([rng.standard_normal(shape) for rng in streams])
+
+
+def sample_loop(
+    denoise: Denoise,
+    schedule: Schedule,
+    x: np.ndarray,
+    streams: list[np.random.Generator],
+    sampler: str = "ddpm",
+    eta: float = 0.0,
+    compose: Callable[[np.ndarray], np.ndarray] | None = None,
+    harmonize: Callable[[np.ndarray, int], np.ndarray] | None = None,
+    progress: Callable[[int, int], None] | None = None,
+) -> np.ndarray:
+    """The reverse process over `schedule`'s chain, from x (N, F, T) at its last step to x0,
+    with any denoiser. Per step: x0_hat = compose(denoise(x, t)); one noise draw per sample
+    (not at the last step); the DDPM or DDIM update; then harmonize(x, step - 1) (not after
+    the last step). Hooks that draw noise use the same per-sample streams, after the step's own."""
+    total = len(schedule.timesteps)
+    for step in reversed(range(total)):
+        x0 = denoise(x, int(schedule.timesteps[step]))
+        if compose is not None:
+            x0 = compose(x0)
+        noise = draw(streams, x.shape[1:]) if step > 0 else None
+        if sampler == "ddpm":
+            x = schedule.ddpm_step(step, x, x0, noise)
+        else:
+            x = schedule.ddim_step(step, x, x0, eta, noise)
+        if harmonize is not None and step > 0:
+            x = harmonize(x, step - 1)
+        if progress:
+            progress(total - step, total)
+    return x
+
+
+def ilvr(schedule: Schedule, reference: np.ndarray, region: np.ndarray, factor: int, stop_t: float,
+         streams: list[np.random.Generator]) -> Callable[[np.ndarray, int], np.ndarray]:
+    """ILVR's hook (Choi et al.): inside `region`, replace x's low frequencies by those of the
+    reference noised to the same step, while the step's timestep is above `stop_t`."""
+
+    def harmonize(x: np.ndarray, step: int) -> np.ndarray:
+        if schedule.timesteps[step] <= stop_t:
+            return x
+        noisy_reference = schedule.q_sample(reference, step, draw(streams, x.shape[1:]))
+        return x + region * (low_pass(noisy_reference, factor) - low_pass(x, factor))
+
+    return harmonize
+
+
 def sample_features(
     model: MotionModel,
     frames: int,
@@ -190,46 +246,21 @@ def sample_features(
     if loop and guide is not None:
         raise SinMDMError("loop cannot be combined with guides (applications): sample a loop without one")
     options = options.resolve(model, frames)
-    count, seed, sampler, steps, eta = options.count, options.seed, options.sampler, options.steps, options.eta
     margin = 0 if loop else options.margin
-    hop = options.hop
-    denoise = WindowedDenoiser(model, frames + 2 * margin, hop, loop=loop)
+    denoise = WindowedDenoiser(model, frames + 2 * margin, options.hop, loop=loop)
     length = denoise.frames
-    chain = Schedule.from_alphas_cumprod(model.alphas_cumprod, steps)
-    c1, c2, log_var = chain.posterior()
-    abar = chain.alphas_cumprod
-    stop_t = HARMONIZE_STOP * len(model.alphas_cumprod)
-    streams = [np.random.default_rng(seed + i) for i in range(count)]
-    shape = (model.features, length)
-    x = np.stack([rng.standard_normal(shape) for rng in streams])
-
-    reference = keep = region = None
+    schedule = Schedule.from_alphas_cumprod(model.alphas_cumprod, options.steps)
+    streams = [np.random.default_rng(options.seed + i) for i in range(options.count)]
+    x = draw(streams, (model.features, length))
+    compose = harmonize = None
     if guide is not None:
         reference = fit_guide(np.asarray(guide.reference, dtype=np.float64), length, margin)
         keep = fit_guide(guide.keep, length, margin)
         region = fit_guide(guide.harmonize, length, margin)
-
-    total = len(chain.timesteps)
-    for i in reversed(range(total)):
-        x0 = denoise(x, int(chain.timesteps[i]))
         if keep is not None:
-            x0 = x0 * (1.0 - keep) + reference * keep
-        noise = np.stack([rng.standard_normal(shape) for rng in streams]) if i > 0 else None
-        if sampler == "ddpm":
-            x = c1[i] * x0 + c2[i] * x
-            if i > 0:
-                x = x + np.exp(0.5 * log_var[i]) * noise
-        else:
-            abar_prev = abar[i - 1] if i > 0 else 1.0
-            eps = (x - np.sqrt(abar[i]) * x0) / np.sqrt(1.0 - abar[i])
-            sigma = eta * np.sqrt((1 - abar_prev) / (1 - abar[i]) * (1 - abar[i] / abar_prev))
-            x = np.sqrt(abar_prev) * x0 + np.sqrt(max(1 - abar_prev - sigma**2, 0.0)) * eps
-            if i > 0 and sigma > 0:
-                x = x + sigma * noise
-        if region is not None and i > 0 and chain.timesteps[i - 1] > stop_t:
-            ref_noise = np.stack([rng.standard_normal(shape) for rng in streams])
-            noisy_ref = np.sqrt(abar[i - 1]) * reference + np.sqrt(1 - abar[i - 1]) * ref_noise
-            x = x + region * (low_pass(noisy_ref, guide.factor) - low_pass(x, guide.factor))
-        if progress:
-            progress(total - i, total)
+            compose = lambda x0: x0 * (1.0 - keep) + reference * keep  # noqa: E731
+        if region is not None:
+            stop_t = HARMONIZE_STOP * len(model.alphas_cumprod)
+            harmonize = ilvr(schedule, reference, region, guide.factor, stop_t, streams)
+    x = sample_loop(denoise, schedule, x, streams, options.sampler, options.eta, compose, harmonize, progress)
     return x[:, :, margin : margin + frames].transpose(0, 2, 1).astype(np.float32)
