@@ -29,7 +29,9 @@ from .options import DEFAULT_STEPS, EDGE_MARGIN, SAMPLERS, SamplingOptions  # no
 from .schedule import Schedule
 
 HARMONIZE_STOP = 0.02  # ILVR guidance stops for the last 2 % of the schedule (t <= 20 of 1000)
-MAX_WINDOWS_PER_CALL = 256
+# Windows per denoiser call: 32 keeps a 10-minute motion's peak memory at about half of
+# 256's with no measurable cost in speed (BENCHMARKS.md, issue 16).
+MAX_WINDOWS_PER_CALL = 32
 
 
 @dataclass(frozen=True)
@@ -135,18 +137,19 @@ class WindowedDenoiser:
 
     def __call__(self, x_t: np.ndarray, t: int) -> np.ndarray:
         samples, features, _ = x_t.shape
-        windows = x_t[:, :, self.index]  # (N, F, K, W)
-        batch = windows.transpose(0, 2, 1, 3).reshape(-1, features, self.window).astype(np.float32)
-        steps = np.full(len(batch), float(t), dtype=np.float32)
-        out = np.concatenate([
-            self.denoiser(batch[i : i + MAX_WINDOWS_PER_CALL], steps[i : i + MAX_WINDOWS_PER_CALL])
-            for i in range(0, len(batch), MAX_WINDOWS_PER_CALL)
-        ])
-        out = out.reshape(samples, len(self.starts), features, self.window).astype(np.float64) * self.weights
+        per_call = max(1, MAX_WINDOWS_PER_CALL // samples)  # windows of every sample in one call
+        steps = np.full(samples * per_call, float(t), dtype=np.float32)
         blended = np.zeros(x_t.shape)
-        for k, span in enumerate(self.spans):
-            blended[:, :, span] += out[:, k]
-        return blended * self.normaliser
+        # A chunk of windows at a time: memory stays bounded by the chunk, not the length.
+        for first in range(0, len(self.starts), per_call):
+            chunk = range(first, min(first + per_call, len(self.starts)))
+            windows = x_t[:, :, self.index[chunk.start : chunk.stop]]  # (N, F, k, W)
+            batch = windows.transpose(0, 2, 1, 3).reshape(-1, features, self.window).astype(np.float32)
+            out = self.denoiser(batch, steps[: len(batch)]).reshape(samples, len(chunk), features, self.window)
+            for j, k in enumerate(chunk):
+                blended[:, :, self.spans[k]] += out[:, j].astype(np.float64) * self.weights
+        blended *= self.normaliser
+        return blended
 
 
 def cycle_displacement(codec, features: np.ndarray) -> np.ndarray:

@@ -78,10 +78,11 @@ class Schedule:
         plus its fixed-small noise except at the last step (respaced chains: the same formula
         on the respaced coefficients)."""
         c1, c2, log_var = self._posterior
-        x = c1[step] * x0 + c2[step] * x
+        mean = c1[step] * x0
+        mean += c2[step] * x  # in place: long motions hold fewer (samples, features, frames) arrays
         if step > 0:
-            x = x + np.exp(0.5 * log_var[step]) * noise
-        return x
+            mean += np.exp(0.5 * log_var[step]) * noise
+        return mean
 
     def ddim_step(self, step: int, x: np.ndarray, x0: np.ndarray, eta: float, noise: np.ndarray | None) -> np.ndarray:
         """DDIM's update (Song et al. eq. 12); `eta` 0 is deterministic, 1 is DDPM-like."""
