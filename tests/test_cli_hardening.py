@@ -198,3 +198,23 @@ def test_long_paths_do_not_wrap_off_a_terminal(tmp_path):
                      check=True)
     assert str(out) in result.stderr
     assert len(result.stderr.splitlines()) == 1
+
+
+def test_execution_provider_option(tmp_path):
+    """CPU is the default and the tested path; a provider this onnxruntime build lacks, or an
+    unknown name, is one line naming --provider, before any work."""
+    import onnxruntime as ort
+
+    from sinmdm.runtime.model import PROVIDERS
+
+    assert load_model(provider="cpu").denoisers[64].session.get_providers()[0] == "CPUExecutionProvider"
+    with pytest.raises(OptionError) as unknown:
+        load_model(provider="tpu")
+    assert unknown.value.option == "provider"
+    missing = next((name for name, ep in PROVIDERS.items() if ep not in ort.get_available_providers()), None)
+    if missing is None:
+        pytest.skip("every provider is installed here")
+    out = tmp_path / "out"
+    result = call_cli("sinmdm-run", "sample", "--provider", missing, *QUICK, "--out", str(out))
+    assert result.returncode == 2 and result.stderr.startswith("error: --provider:") and result.stderr.count("\n") == 1
+    assert not out.exists() or not any(out.iterdir())

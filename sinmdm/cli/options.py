@@ -37,6 +37,8 @@ Cleanup = Annotated[bool, typer.Option("--cleanup/--no-cleanup", help="Pin the f
                                        "predicts contacts, with IK on the legs (removes foot sliding).")]
 Threads = Annotated[Optional[int], typer.Option("--threads", help=f"onnxruntime threads, 1..{MAX_THREADS} "
                                                 "(default: all cores).")]
+Provider = Annotated[str, typer.Option("--provider", help="onnxruntime execution provider: cpu (default, the tested "
+                                      "path), cuda, openvino, directml or coreml, where its onnxruntime build is installed.")]
 Out = Annotated[Path, typer.Option("--out", "-o", help="Output directory.")]
 Name = Annotated[str, typer.Option("--name", help="File name prefix (a plain name: files stay inside --out).")]
 Format = Annotated[str, typer.Option("--format", help="bvh or glb (glb needs the preview extra).")]
@@ -70,7 +72,7 @@ def _common_parameters(default_name: str) -> list[inspect.Parameter]:
     keyword = inspect.Parameter.KEYWORD_ONLY
     common = [("count", Count, 1), ("seed", Seed, 0), ("sampler", Sampler, "ddpm"), ("steps", Steps, None),
               ("eta", Eta, 0.0), ("hop", Hop, None), ("margin", Margin, EDGE_MARGIN), ("cleanup", Cleanup, True),
-              ("threads", Threads, None), ("out", Out, Path("sinmdm_out")), ("name", Name, default_name),
+              ("threads", Threads, None), ("provider", Provider, "cpu"), ("out", Out, Path("sinmdm_out")), ("name", Name, default_name),
               ("fmt", Format, "bvh"), ("npz", Npz, False), ("preview", Preview, False), ("force", Force, False),
               ("as_json", Json, False)]
     return [inspect.Parameter(name, keyword, annotation=kind, default=default) for name, kind, default in common]
@@ -100,10 +102,10 @@ def sampling_command(app: typer.Typer):
     return register
 
 
-def load_cli_model(models: Optional[list[Path]], threads: Optional[int]) -> "MotionModel":
+def load_cli_model(models: Optional[list[Path]], threads: Optional[int], provider: str = "cpu") -> "MotionModel":
     from ..runtime.model import load_model
 
-    return load_model(models or None, threads=threads)
+    return load_model(models or None, threads=threads, provider=provider)
 
 
 def _progress(label: str):
@@ -115,13 +117,13 @@ def _progress(label: str):
 
 
 def _run_sampling(command: str, body: Callable[..., Job], own: dict, *, models, count, seed, sampler, steps, eta, hop,
-                  margin, cleanup, threads, out, name, fmt, npz, preview, force, as_json) -> None:
+                  margin, cleanup, threads, provider, out, name, fmt, npz, preview, force, as_json) -> None:
     from ..runtime.outputs import plan_sample_outputs
     from .writers import extra_writers
 
     options = SamplingOptions(count=count, seed=seed, sampler=sampler, steps=steps, eta=eta, hop=hop, margin=margin,
                               cleanup=cleanup)
-    model = load_cli_model(models, threads)
+    model = load_cli_model(models, threads, provider)
     job = body(Context(model, options, force), **own)
     resolved = options.resolve(model, job.frames)
     with plan_sample_outputs(out, name, options.seeds, fmt=fmt, npz=npz, preview=preview, force=force,

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import ModelError, SinMDMError
+from .errors import ModelError, OptionError, SinMDMError
 from .features import MotionCodec
 from .model_format import INPUT_NAMES, METADATA_KEY, OUTPUT_NAME, decode_metadata
 from .options import check_whole
@@ -90,18 +90,39 @@ class MotionModel:
 MAX_THREADS = 256
 
 
+# `provider` names -> onnxruntime execution providers, each used where its onnxruntime build is
+# installed (onnxruntime-gpu, onnxruntime-openvino, onnxruntime-directml); CPU is the tested path.
+PROVIDERS = {"cpu": "CPUExecutionProvider", "cuda": "CUDAExecutionProvider",
+             "openvino": "OpenVINOExecutionProvider", "directml": "DmlExecutionProvider",
+             "coreml": "CoreMLExecutionProvider"}
+
+
 def _check_threads(threads: int | None) -> int | None:
     return None if threads is None else check_whole("threads", threads, 1, MAX_THREADS)
 
 
-def _open_session(path: Path, options) -> object:
+def execution_providers(provider: str) -> list[str]:
+    """onnxruntime's providers for `provider`, CPU behind it for any operator it lacks."""
+    import onnxruntime as ort
+
+    if provider not in PROVIDERS:
+        raise OptionError("provider", f"unknown provider {provider!r}: use one of {', '.join(PROVIDERS)}")
+    available = ort.get_available_providers()
+    if PROVIDERS[provider] not in available:
+        names = [name for name, ep in PROVIDERS.items() if ep in available]
+        raise OptionError("provider", f"{provider} is not available in this onnxruntime build "
+                                      f"(available: {', '.join(names)})")
+    return list(dict.fromkeys([PROVIDERS[provider], PROVIDERS["cpu"]]))
+
+
+def _open_session(path: Path, options, providers: list[str]) -> object:
     """The one InferenceSession of a file: the denoiser runs on it and its metadata is read from it."""
     import onnxruntime as ort
 
     if not path.is_file():
         raise SinMDMError(f"model file {path} does not exist")
     try:
-        return ort.InferenceSession(str(path), sess_options=options, providers=["CPUExecutionProvider"])
+        return ort.InferenceSession(str(path), sess_options=options, providers=providers)
     except Exception as exc:  # onnxruntime raises its own exception types for damaged files
         first_line = str(exc).strip().splitlines()[0][:160] if str(exc).strip() else type(exc).__name__
         raise ModelError(f"{path} is not a readable ONNX model ({first_line})") from None
@@ -141,18 +162,21 @@ def _check_graph(denoiser: OnnxDenoiser, features: int, timesteps: int) -> None:
         raise ModelError(f"{path}: its graph returns its input unchanged: not a trained denoiser")
 
 
-def load_model(paths: list[str | os.PathLike] | str | os.PathLike | None = None, threads: int | None = None) -> MotionModel:
-    """Load one model from its `.onnx` windows (default: the bundled demo model)."""
+def load_model(paths: list[str | os.PathLike] | str | os.PathLike | None = None, threads: int | None = None,
+               provider: str = "cpu") -> MotionModel:
+    """Load one model from its `.onnx` windows (default: the bundled demo model), run by
+    onnxruntime's `provider` (a key of PROVIDERS)."""
     if paths is None or (isinstance(paths, list) and not paths):
         paths = [DEMO_MODEL]
     if isinstance(paths, (str, os.PathLike)):
         paths = [paths]
     options = _session_options(_check_threads(threads))
+    providers = execution_providers(provider)
     first: dict | None = None
     denoisers: dict[int, OnnxDenoiser] = {}
     for raw in paths:
         path = Path(raw)
-        session = _open_session(path, options)
+        session = _open_session(path, options, providers)
         metadata = decode_metadata(session.get_modelmeta().custom_metadata_map.get(METADATA_KEY), str(path))
         if first is None:
             first, codec = metadata, _read_codec(metadata, path)
