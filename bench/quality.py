@@ -51,14 +51,16 @@ def sample_and_score(model: Path, clip: Path, out: Path, steps: int, count: int,
     reference = read_bvh(clip)
     frames = 2 * round(reference.frames / reference.fps * loaded.codec.fps)
     began = time.perf_counter()
-    result = generate(loaded, frames, SamplingOptions(count=count, seed=0, steps=steps, hop=hop, sampler=sampler, **options))
+    chosen = SamplingOptions(count=count, seed=0, steps=steps, hop=hop, sampler=sampler, **options)
+    result = generate(loaded, frames, chosen)
     seconds = time.perf_counter() - began
     paths = write_outputs(loaded, result, out, force=True)
     scores = evaluate_files(clip, paths, preset=preset)
     keys = ("coverage", "global_diversity", "local_diversity", "inter_diversity", "intra_diversity_diff")
     return {**{k: scores[k] for k in keys}, "steps": steps, "samples": count, "frames": frames,
             "sampling_seconds": round(seconds, 2), "eval_preset": preset,
-            "hop": hop or loaded.denoiser_for(frames).window // 2, "sampler": sampler, "options": options,
+            # the hop actually used: hop=None takes the model's measured hop, else half a window
+            "hop": chosen.resolve(loaded, frames).hop or loaded.denoiser_for(frames).window // 2, "sampler": sampler, "options": options,
             "plausibility": (scores.get("plausibility") or {}).get("aggregate")}
 
 

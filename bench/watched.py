@@ -81,13 +81,13 @@ def main() -> None:
                 frames = row["frames"]
                 rows.append({"variant": variant, **row})
                 print(json.dumps(rows[-1]), flush=True)
-            # the hop the run measured, applied by sinmdm-run sample (sample_and_score's hop=None is half a window)
-            hop = model.default_hop(frames)
-            if hop != model.denoiser_for(frames).window // 2:
+            # hop=None above is the hop the run measured (as `sinmdm-run sample` uses it); beside it, half a window
+            half = model.denoiser_for(frames).window // 2
+            if model.default_hop(frames) not in (None, half):
                 for variant, options in SAMPLER_VARIANTS.items():
                     row = sample_and_score(path, clip, run_dir / f"samples_{variant}_hop", steps, args.samples,
-                                           protocol, hop=hop, **options)
-                    rows.append({"variant": f"{variant} hop {hop}", **row})
+                                           protocol, hop=half, **options)
+                    rows.append({"variant": f"{variant} hop {half}", **row})
             checks = [{"step": r["step"], **r["check"]} for r in read_log(run_dir) if "check" in r]
             stage = config.get("stage")
             if stage:  # the second stage's checks, on the run's step axis
