@@ -15,6 +15,7 @@ import numpy as np
 from .bvh import BVH, Skeleton
 from .kinematics import forward_kinematics
 from .rotations import (
+    by_frame_chunks,
     euler_to_matrix,
     matrix_to_euler,
     unwrap_euler,
@@ -107,7 +108,8 @@ def animation_to_bvh(animation: Animation) -> BVH:
     for order, joints in by_order.items():
         # Joints with fewer than three rotation channels keep only their own axes.
         full = _full_order(order)
-        euler = np.degrees(unwrap_euler(matrix_to_euler(matrices[:, joints], full), full))
+        euler = by_frame_chunks(lambda m: matrix_to_euler(m[:, joints], full), matrices)
+        euler = np.degrees(unwrap_euler(euler, full, out=euler), out=euler)
         for k, j in enumerate(joints):
             values[:, _rotation_columns(skeleton, j)] = euler[:, k, : len(order)]
     return BVH(skeleton, 1.0 / animation.fps, values)

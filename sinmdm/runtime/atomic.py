@@ -12,7 +12,7 @@ import threading
 import weakref
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Callable, Iterator, Sequence
+from typing import Callable, Iterable, Iterator, Sequence
 
 from .errors import OptionError, SinMDMError
 
@@ -268,6 +268,15 @@ class OutputSet:
     def write_text(self, name: str, text: str) -> None:
         self.write_bytes(name, text.encode("utf-8"))
 
+    def write_chunks(self, name: str, chunks: Iterable[str]) -> None:
+        """Text written piece by piece (UTF-8), so it is never held whole."""
+        def fill(tmp: Path) -> None:
+            with open(tmp, "wb") as file:
+                for chunk in chunks:
+                    file.write(chunk.encode("utf-8"))
+
+        self.write(name, fill)
+
     def commit(self) -> list[Path]:
         """Rename every written temp into place (signals held, so never half the set), fsync the directory."""
         missing = [name for name in self.names if name not in self._written]
@@ -317,3 +326,9 @@ def write_bytes_atomic(target: str | os.PathLike, data: bytes) -> None:
 
 def write_text_atomic(target: str | os.PathLike, text: str) -> None:
     write_bytes_atomic(target, text.encode("utf-8"))
+
+
+def write_chunks_atomic(target: str | os.PathLike, chunks: Iterable[str]) -> None:
+    with OutputSet.for_file(target, force=True) as out:
+        out.write_chunks(out.names[0], chunks)
+        out.commit()

@@ -16,10 +16,11 @@ import os
 import re
 import stat
 from dataclasses import dataclass
+from typing import Iterator
 
 import numpy as np
 
-from .atomic import write_text_atomic
+from .atomic import write_chunks_atomic
 from .errors import BVHError, SinMDMError
 
 MAX_JOINTS = 10_000
@@ -605,11 +606,20 @@ def _first_non_numeric(data_lines: list[str], data_index: int, path: str) -> BVH
 # --------------------------------------------------------------------------- writing
 
 
+MOTION_LINES_PER_CHUNK = 1024  # frames formatted at a time: a long motion's text is streamed, not held
+
+
 def format_bvh(bvh: BVH, precision: int = 6, unwrap: bool = True) -> str:
     """BVH text: tab indentation, '\\n' line ends, values with `precision` decimals.
 
     With `unwrap`, every rotation curve is unwrapped over time (period 360), so
     the file has no 360-degree jumps; the rotations are the same."""
+    return "".join(bvh_text_chunks(bvh, precision, unwrap))
+
+
+def bvh_text_chunks(bvh: BVH, precision: int = 6, unwrap: bool = True) -> Iterator[str]:
+    """format_bvh's text in pieces (the hierarchy, then MOTION_LINES_PER_CHUNK frames at a
+    time); the values are checked before the first piece."""
     if not 0 <= precision <= 17:
         raise ValueError(f"precision must be between 0 and 17, got {precision}")
     skeleton = bvh.skeleton
@@ -618,25 +628,30 @@ def format_bvh(bvh: BVH, precision: int = 6, unwrap: bool = True) -> str:
         raise ValueError("cannot write a BVH with NaN or infinite values")
     if unwrap and values.shape[0] > 1:
         rotation = _rotation_columns(skeleton)
-        values[:, rotation] = np.unwrap(values[:, rotation], period=360.0, axis=0)
+        for first in range(0, len(rotation), 16):  # a few curves at a time: np.unwrap's temporaries stay small
+            columns = rotation[first : first + 16]
+            values[:, columns] = np.unwrap(values[:, columns], period=360.0, axis=0)
+    return _text_chunks(bvh, values, precision)
 
+
+def _text_chunks(bvh: BVH, values: np.ndarray, precision: int) -> Iterator[str]:
     out = io.StringIO()
     out.write("HIERARCHY\n")
-    _write_hierarchy(out, skeleton)
+    _write_hierarchy(out, bvh.skeleton)
     out.write(f"MOTION\nFrames: {bvh.frames}\nFrame Time: {_exact(bvh.frame_time)}\n")
+    yield out.getvalue()
     if values.size:
-        # Rounding first and adding 0.0 turns -0.0 into 0.0, so no "-0.000000".
-        rounded = np.round(values, precision) + 0.0
         row = " ".join([f"%.{precision}f"] * values.shape[1])
-        out.write("\n".join([row % tuple(r) for r in rounded.tolist()]))
-        out.write("\n")
+        for start in range(0, len(values), MOTION_LINES_PER_CHUNK):
+            # Rounding first and adding 0.0 turns -0.0 into 0.0, so no "-0.000000".
+            rounded = np.round(values[start : start + MOTION_LINES_PER_CHUNK], precision) + 0.0
+            yield "".join([row % tuple(r) + "\n" for r in rounded.tolist()])
     elif bvh.frames:
-        out.write("\n" * bvh.frames)
-    return out.getvalue()
+        yield "\n" * bvh.frames
 
 
 def write_bvh(path: str | os.PathLike, bvh: BVH, precision: int = 6, unwrap: bool = True) -> None:
-    write_text_atomic(path, format_bvh(bvh, precision=precision, unwrap=unwrap))
+    write_chunks_atomic(path, bvh_text_chunks(bvh, precision=precision, unwrap=unwrap))
 
 
 def _rotation_columns(skeleton: Skeleton) -> list[int]:

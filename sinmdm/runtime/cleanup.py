@@ -37,7 +37,7 @@ import numpy as np
 
 from .animation import Animation
 from .contacts import contact_labels
-from .kinematics import forward_kinematics
+from .kinematics import chain_kinematics, forward_kinematics, positions_by_chunks
 from .rig import ancestors
 
 CONTACT_THRESHOLD = 0.5  # a label above this is "in contact"
@@ -300,12 +300,17 @@ class _Targets:
     up: int
 
 
+def _leg_joints(leg: Leg) -> list[int]:
+    """The joints whose local rotations solving `leg` may change."""
+    return list(dict.fromkeys(j for j in (leg.hip, leg.knee, leg.effector, *leg.pivots) if j is not None))
+
+
 def _solve_leg(local: np.ndarray, translations: np.ndarray, parents: np.ndarray, leg: Leg, contacts: list[int],
-               targets: _Targets, free: np.ndarray | float = 1.0) -> np.ndarray:
-    """Updated local rotations (T, J, 3, 3) for one leg; `free` (T,) scales the offsets
-    (0 where an application keeps the leg's pose)."""
+               targets: _Targets, free: np.ndarray | float = 1.0) -> None:
+    """Solve one leg in place on the local rotations (T, J, 3, 3); `free` (T,) scales the
+    offsets (0 where an application keeps the leg's pose). Only `_leg_joints(leg)` change,
+    and only on frames where the leg has an offset to reach."""
     anchors, weights = targets.anchors, targets.weights * np.reshape(free, (-1, 1))
-    glob, pos = forward_kinematics(local, translations, parents)
     top = leg.contacts[0] if contacts[leg.contacts[0]] == leg.effector else None
     lower = [k for k in leg.contacts if k != top]
     # The effector moves by its own offset, and otherwise by what its lower contacts ask.
@@ -317,55 +322,62 @@ def _solve_leg(local: np.ndarray, translations: np.ndarray, parents: np.ndarray,
     shift = own + (1.0 - own_w)[:, None] * low_offset
     active = (own_w > 0) | (low_w > 0)
     if not active.any():
-        return local
-    e, k = leg.effector, leg.knee
-    out = local.copy()
+        return
+    e, k, h = leg.effector, leg.knee, leg.hip
+    changed = _leg_joints(leg)
+    before = local[:, changed]  # a copy (fancy index): restored on the frames without an offset
+    chain = [j for j in (h, k, e) if j is not None]
+    glob, pos = chain_kinematics(local, translations, parents, chain + [parents[j] for j in chain])
+    at = {j: i for i, j in enumerate(chain)}
+    parent_glob = {j: glob[:, len(chain) + i] for i, j in enumerate(chain)}
     target = targets.positions[:, e] + shift  # from the pose before cleanup: a second pass aims at the same spot
-    if leg.hip is not None:
-        h = leg.hip
-        hinge = _hinge_axes(pos[:, h], pos[:, k], pos[:, e], glob[:, h])
-        hip_world, knee_world = two_bone_ik(pos[:, h], pos[:, k], pos[:, e], target, hinge)
-        out[:, h] = _apply_world(local[:, h], glob[:, parents[h]], hip_world)
+    if h is not None:
+        hinge = _hinge_axes(pos[:, at[h]], pos[:, at[k]], pos[:, at[e]], glob[:, at[h]])
+        hip_world, knee_world = two_bone_ik(pos[:, at[h]], pos[:, at[k]], pos[:, at[e]], target, hinge)
+        local[:, h] = _apply_world(local[:, h], parent_glob[h], hip_world)
         if k != h:
-            out[:, k] = _apply_world(local[:, k], glob[:, parents[k]], knee_world)
+            local[:, k] = _apply_world(local[:, k], parent_glob[k], knee_world)
         total = hip_world @ knee_world
     else:
-        total = rotation_between(pos[:, e] - pos[:, k], target - pos[:, k])
-        out[:, k] = _apply_world(local[:, k], glob[:, parents[k]], total)
+        total = rotation_between(pos[:, at[e]] - pos[:, at[k]], target - pos[:, at[k]])
+        local[:, k] = _apply_world(local[:, k], parent_glob[k], total)
     if leg.keep_orientation:  # keep the effector's world orientation: the joints below translate rigidly
-        out[:, e] = _apply_world(local[:, e], glob[:, parents[e]], np.swapaxes(total, -1, -2))
+        local[:, e] = _apply_world(local[:, e], parent_glob[e], np.swapaxes(total, -1, -2))
     for m, pivot in zip([m for m in leg.contacts if m != top], leg.pivots):
         if pivot is None:
             continue
-        glob, pos = forward_kinematics(out, translations, parents)
         joint = contacts[m]
-        goal = _on_sphere(pos[:, pivot], pos[:, joint], targets.positions[:, joint] + anchors[:, m], targets.up)
-        aim = rotation_between(pos[:, joint] - pos[:, pivot], goal - pos[:, pivot], weights[:, m])
-        out[:, pivot] = _apply_world(out[:, pivot], glob[:, parents[pivot]], aim)
-    return np.where(active[:, None, None, None], out, local)
+        glob, pos = chain_kinematics(local, translations, parents, [pivot, joint, parents[pivot]])
+        goal = _on_sphere(pos[:, 0], pos[:, 1], targets.positions[:, joint] + anchors[:, m], targets.up)
+        aim = rotation_between(pos[:, 1] - pos[:, 0], goal - pos[:, 0], weights[:, m])
+        local[:, pivot] = _apply_world(local[:, pivot], glob[:, 2], aim)
+    still = np.flatnonzero(~active)
+    local[still[:, None], changed] = before[still]
 
 
 def cleanup_contacts(animation: Animation, codec, features: np.ndarray,
-                     loop_displacement: np.ndarray | None = None, keep: np.ndarray | None = None) -> Animation:
+                     loop_displacement: np.ndarray | None = None, keep: np.ndarray | None = None,
+                     in_place: bool = False) -> Animation:
     """The animation with its contact joints pinned where `features`' contact labels
     (T, F, the sampled features the animation was decoded from) say they touch the
     floor. `loop_displacement`: for a loop, the root's motion per cycle as
     `sampler.cycle_displacement` gives it (metres along `codec.horizontal_axes`),
     so that contacts across the seam are one interval and the loop stays seamless.
     `keep` (T, F) in [0, 1]: an application's kept features (`Guide.keep`); a leg whose
-    rotations are kept is left as the application made it, by the kept share."""
+    rotations are kept is left as the application made it, by the kept share. `in_place`:
+    the legs are solved in `animation`'s own rotations and its root moved in its own
+    translations (a caller that owns a long motion saves a copy of each)."""
     channels = codec.layout.indices(("contact",))
     contacts = list(codec.contact_joints)
     if not contacts or not len(channels) or animation.frames < MIN_CONTACT_FRAMES:
         return animation
-    labels = np.asarray(features, dtype=np.float64)[: animation.frames, channels]
+    labels = np.asarray(features)[: animation.frames, channels].astype(np.float64)
     inside = np.stack([contact_mask(labels[:, k]) for k in range(len(contacts))], axis=1)
     if not inside.any():
         return animation
     up = codec.up_axis
     parents = animation.skeleton.parents
-    local = animation.rotations
-    _, positions = forward_kinematics(local, animation.translations, parents)
+    positions = positions_by_chunks(animation.rotations, animation.translations, parents)
     limit = MAX_SLIDE * codec.size / codec.scale
     inside = np.stack([drop_slides(inside[:, k], positions[:, j], up, limit) for k, j in enumerate(contacts)], axis=1)
     # A foot the model moves slower than the codec's contact speed is planted too, labelled
@@ -373,31 +385,37 @@ def cleanup_contacts(animation: Animation, codec, features: np.ndarray,
     slow = contact_labels(positions[:, contacts] * codec.scale, animation.fps, codec.contact_speed).astype(bool)
     inside = inside | np.stack([contact_mask(slow[:, k]) for k in range(len(contacts))], axis=1)
     if ROOT_CORRECTION and loop_displacement is None and keep is None:
-        animation = slow_root(animation, codec, positions, inside)
-        _, positions = forward_kinematics(local, animation.translations, parents)
-    shift = _cycle_shift(codec, local, animation.translations, loop_displacement)
+        animation = slow_root(animation, codec, positions, inside, in_place)
+        positions = positions_by_chunks(animation.rotations, animation.translations, parents, out=positions)
+    shift = _cycle_shift(codec, animation.rotations, animation.translations, loop_displacement)
     legs = find_legs(animation, codec, positions)
     free = [_free(codec, leg, keep) for leg in legs]
+    # Only the legs' joints change: their pose before cleanup is what every pass starts from.
+    changed = list(dict.fromkeys(j for leg in legs for j in _leg_joints(leg)))
+    original = animation.rotations[:, changed]
+    local = animation.rotations if in_place else animation.rotations.copy()
     for _ in range(GROW_PASSES + 1):
-        local = _pin(animation, codec, legs, free, positions, inside, shift)
+        local[:, changed] = original
+        _pin(animation, local, codec, legs, free, positions, inside, shift)
         # Pinning a joint slows its neighbours on the chain (a planted ankle drags the ball of
         # the foot): frames the cleaned motion moves slower than the contact speed are planted
         # too, so the next pass pins them instead of letting them slide at the blend's speed.
-        _, cleaned = forward_kinematics(local, animation.translations, parents)
-        slow = contact_labels(cleaned[:, contacts] * codec.scale, animation.fps, codec.contact_speed).astype(bool)
+        _, cleaned = chain_kinematics(local, animation.translations, parents, contacts)
+        slow = contact_labels(cleaned * codec.scale, animation.fps, codec.contact_speed).astype(bool)
         grown = inside | np.stack([contact_mask(slow[:, k]) for k in range(len(contacts))], axis=1)
         grown = np.stack([drop_slides(grown[:, k], positions[:, j], up, limit) for k, j in enumerate(contacts)], axis=1)
         if (grown == inside).all():
             break
         inside = grown
-    finite = np.isfinite(local).all(axis=(-1, -2))  # never NaN: a joint whose solve failed keeps its pose
-    rotations = np.where(finite[..., None, None], local, animation.rotations)
-    return Animation(animation.skeleton, rotations, animation.translations, animation.fps)
+    solved = local[:, changed]
+    finite = np.isfinite(solved).all(axis=(-1, -2))  # never NaN: a joint whose solve failed keeps its pose
+    local[:, changed] = np.where(finite[..., None, None], solved, original)
+    return Animation(animation.skeleton, local, animation.translations, animation.fps)
 
 
-def _pin(animation: Animation, codec, legs: list[Leg], free: list, positions: np.ndarray, inside: np.ndarray,
-         shift: np.ndarray | None) -> np.ndarray:
-    """Local rotations with every leg solved for the contact frames `inside` (T, C)."""
+def _pin(animation: Animation, local: np.ndarray, codec, legs: list[Leg], free: list, positions: np.ndarray,
+         inside: np.ndarray, shift: np.ndarray | None) -> None:
+    """Every leg solved, in place on `local` (T, J, 3, 3), for the contact frames `inside` (T, C)."""
     up, contacts = codec.up_axis, list(codec.contact_joints)
     anchors, weights = np.zeros((animation.frames, len(contacts), 3)), np.zeros((animation.frames, len(contacts)))
     for k, joint in enumerate(contacts):
@@ -407,13 +425,12 @@ def _pin(animation: Animation, codec, legs: list[Leg], free: list, positions: np
             else:
                 anchors[:, k], weights[:, k] = _cyclic_offsets(positions[:, joint], inside[:, k], shift, up, BLEND_FRAMES)
     targets = _Targets(positions, anchors, weights, up)
-    local = animation.rotations
     for leg, leg_free in zip(legs, free):
-        local = _solve_leg(local, animation.translations, animation.skeleton.parents, leg, contacts, targets, leg_free)
-    return local
+        _solve_leg(local, animation.translations, animation.skeleton.parents, leg, contacts, targets, leg_free)
 
 
-def slow_root(animation: Animation, codec, positions: np.ndarray, inside: np.ndarray) -> Animation:
+def slow_root(animation: Animation, codec, positions: np.ndarray, inside: np.ndarray,
+              in_place: bool = False) -> Animation:
     """The animation with its trajectory joint moved back, frame by frame, by the mean
     horizontal slide of the contact joints planted in both frames: a body that glides
     over its planted feet (the commonest flaw of a drifting model) is slowed to them,
@@ -440,9 +457,9 @@ def slow_root(animation: Animation, codec, positions: np.ndarray, inside: np.nda
     offset = np.concatenate([np.zeros((1, 3)), np.cumsum(step, axis=0)])  # world, file units
     parent = animation.skeleton.parents[joint]
     if parent >= 0:  # translations live in the parent's frame
-        glob, _ = forward_kinematics(animation.rotations, animation.translations, animation.skeleton.parents)
-        offset = np.einsum("tba,tb->ta", glob[:, parent], offset)
-    translations = animation.translations.copy()
+        glob, _ = chain_kinematics(animation.rotations, animation.translations, animation.skeleton.parents, [parent])
+        offset = np.einsum("tba,tb->ta", glob[:, 0], offset)
+    translations = animation.translations if in_place else animation.translations.copy()
     translations[:, joint] += offset
     return Animation(animation.skeleton, animation.rotations, translations, animation.fps)
 

@@ -29,7 +29,7 @@ from .errors import OptionError, SinMDMError
 from .options import check_number
 from .resample import resample_count, resample_linear, resample_rotations
 from .rig import AXIS_NAMES, analyse_rig, skeleton_extent as skeleton_size
-from .rotations import matrix_to_6d, matrix_to_quat, quat_to_matrix, sixd_to_matrix
+from .rotations import by_frame_chunks, matrix_to_6d, matrix_to_quat, quat_to_matrix, sixd_to_matrix
 
 ROT6D = ("r00", "r01", "r02", "r10", "r11", "r12")
 UNIT_SCALES = {"m": 1.0, "cm": 0.01, "mm": 0.001, "in": 0.0254, "ft": 0.3048}
@@ -309,20 +309,26 @@ class MotionCodec:
     def decode(self, features: np.ndarray, start: np.ndarray | None = None) -> Animation:
         """Animation at the codec's frame rate from (T, F) features; the root path is
         re-integrated from `start` (horizontal, metres, default the origin)."""
-        features = np.asarray(features, dtype=np.float64)
+        features = np.asarray(features)
         if features.ndim != 2 or features.shape[1] != self.width:
             raise SinMDMError(f"features have shape {features.shape}, expected (frames, {self.width})")
         frames, joints = features.shape[0], self.skeleton.num_joints
         rest = np.eye(3) if self.rest_rotations is None else self.rest_rotations
-        matrices = np.broadcast_to(rest, (frames, joints, 3, 3)).copy()
-        rot = self.layout.indices(("rotation",))
-        matrices[:, self.rotation_joints] = sixd_to_matrix(features[:, rot].reshape(frames, -1, 6))
+        rot, rotating = self.layout.indices(("rotation",)), self.rotation_joints
+
+        def local_rotations(chunk: np.ndarray) -> np.ndarray:  # (n, F) -> (n, J, 3, 3)
+            matrices = np.broadcast_to(rest, (len(chunk), joints, 3, 3)).copy()
+            matrices[:, rotating] = sixd_to_matrix(chunk[:, rot].reshape(len(chunk), -1, 6))
+            return matrices
+
+        matrices = by_frame_chunks(local_rotations, features)
         translations = np.broadcast_to(self.rest_translations, (frames, joints, 3)).copy()
         if self.translation_joints:
             tr = self.layout.indices(("translation",))
-            translations[:, list(self.translation_joints)] = features[:, tr].reshape(frames, -1, 3) / self.scale
+            metres = features[:, tr].astype(np.float64).reshape(frames, -1, 3)
+            translations[:, list(self.translation_joints)] = metres / self.scale
         if self.trajectory_joint is not None:
-            dx, y, dz = features[:, self.layout.indices(("root",))].T
+            dx, y, dz = features[:, self.layout.indices(("root",))].astype(np.float64).T
             origin = np.zeros(2) if start is None else np.asarray(start, dtype=np.float64)
             x = origin[0] + np.concatenate([[0.0], np.cumsum(dx[1:])])
             z = origin[1] + np.concatenate([[0.0], np.cumsum(dz[1:])])

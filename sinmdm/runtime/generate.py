@@ -69,5 +69,5 @@ def decode_clip(model: MotionModel, features: np.ndarray, start: np.ndarray | No
     animation = model.codec.decode(features, start)
     if cleanup:
         kept = None if keep is None else np.broadcast_to(fit_guide(keep, len(features)), features.shape[::-1]).T
-        animation = cleanup_contacts(animation, model.codec, features, loop_displacement, kept)
+        animation = cleanup_contacts(animation, model.codec, features, loop_displacement, kept, in_place=True)
     return animation_to_bvh(animation)

@@ -12,6 +12,8 @@ from typing import Sequence
 
 import numpy as np
 
+from .rotations import FRAME_CHUNK
+
 
 def forward_kinematics(
     local_rotations: np.ndarray, local_translations: np.ndarray, parents: Sequence[int] | np.ndarray
@@ -66,3 +68,39 @@ def end_site_positions(
     return global_positions[..., parent_index, :] + np.einsum(
         "...eab,eb->...ea", global_rotations[..., parent_index, :, :], offsets
     )
+
+
+def chain_kinematics(
+    local_rotations: np.ndarray, local_translations: np.ndarray, parents: Sequence[int] | np.ndarray,
+    joints: Sequence[int],
+) -> tuple[np.ndarray, np.ndarray]:
+    """Global rotations (..., K, 3, 3) and positions (..., K, 3) of the K `joints` only, by
+    forward kinematics over them and their ancestors: a leg of a 65-joint rig costs its
+    chain, not the whole skeleton (the fingers), at any length of motion."""
+    parents = np.asarray(parents, dtype=np.int64)
+    needed: set[int] = set()
+    for joint in joints:
+        while joint >= 0 and joint not in needed:
+            needed.add(int(joint))
+            joint = parents[joint]
+    order = sorted(needed)
+    at = {joint: i for i, joint in enumerate(order)}
+    sub_parents = [at[parents[j]] if parents[j] >= 0 else -1 for j in order]
+    glob, pos = forward_kinematics(np.asarray(local_rotations)[..., order, :, :],
+                                   np.asarray(local_translations)[..., order, :], sub_parents)
+    pick = [at[j] for j in joints]
+    return glob[..., pick, :, :], pos[..., pick, :]
+
+
+def positions_by_chunks(local_rotations: np.ndarray, local_translations: np.ndarray,
+                        parents: Sequence[int] | np.ndarray, chunk: int = FRAME_CHUNK,
+                        out: np.ndarray | None = None) -> np.ndarray:
+    """(T, J, 3) world positions (into `out` when given), forward kinematics `chunk` frames
+    at a time: the global rotations of a long motion are never held whole."""
+    frames = len(local_rotations)
+    if out is None:
+        out = np.empty(local_translations.shape[:1] + local_rotations.shape[1:-2] + (3,))
+    for start in range(0, frames, chunk):
+        part = slice(start, start + chunk)
+        out[part] = forward_kinematics(local_rotations[part], local_translations[part], parents)[1]
+    return out

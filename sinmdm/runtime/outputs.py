@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING, Callable, Mapping, Sequence
 import numpy as np
 
 from .atomic import OutputSet, check_plain_name
-from .bvh import BVH, format_bvh
+from .bvh import BVH, bvh_text_chunks
 from .errors import OptionError, SinMDMError
 
 if TYPE_CHECKING:
@@ -74,7 +74,7 @@ class SampleOutputs:
 
     def _write_clip(self, stem: str, clip: BVH) -> None:
         if self.fmt == "bvh":
-            self.samples.write_text(f"{stem}.bvh", format_bvh(clip))
+            self.samples.write_chunks(f"{stem}.bvh", bvh_text_chunks(clip))
         else:
             self.samples.write(f"{stem}.glb", lambda tmp: self.writers["glb"](clip, tmp))
 

@@ -27,6 +27,22 @@ def _f64(x: np.ndarray) -> np.ndarray:
     return np.asarray(x, dtype=np.float64)
 
 
+FRAME_CHUNK = 2048  # frames per call of `by_frame_chunks`: a 10-minute motion's temporaries stay small
+
+
+def by_frame_chunks(fn, x: np.ndarray, chunk: int = FRAME_CHUNK) -> np.ndarray:
+    """fn applied to x (T, ...) in chunks along axis 0 and concatenated, for per-frame
+    math whose temporaries would otherwise be several copies of the whole motion."""
+    if len(x) <= chunk:
+        return fn(x)
+    first = fn(x[:chunk])
+    out = np.empty((len(x),) + first.shape[1:], dtype=first.dtype)
+    out[:chunk] = first
+    for start in range(chunk, len(x), chunk):
+        out[start : start + chunk] = fn(x[start : start + chunk])
+    return out
+
+
 def _axis_indices(order: str) -> tuple[int, int, int]:
     if order not in TAIT_BRYAN_ORDERS:
         raise ValueError(f"unsupported Euler order {order!r}; expected one of {', '.join(TAIT_BRYAN_ORDERS)}")
@@ -120,29 +136,30 @@ def _wrap_to_pi(angles: np.ndarray) -> np.ndarray:
     return np.where(angles > np.pi, angles - 2 * np.pi, np.where(angles < -np.pi, angles + 2 * np.pi, angles))
 
 
-def unwrap_euler(angles: np.ndarray, order: str) -> np.ndarray:
+def unwrap_euler(angles: np.ndarray, order: str, out: np.ndarray | None = None) -> np.ndarray:
     """Make Euler curves (T, ..., 3) continuous along time axis 0.
 
     Every Tait-Bryan triple (a, b, c) has a twin (a + pi, pi - b, c + pi) giving
     the same rotation, and each angle is free up to multiples of 2 pi. Frame 0 is
     kept; every later frame takes whichever of the two solutions, shifted per
     component by multiples of 2 pi, lies closest (L2) to the previous frame.
+    `out` (float64, angles' shape) may be `angles` itself: each frame is read before it is written.
     """
     _axis_indices(order)  # validate; the twin formula is the same for all orders
     angles = _f64(angles)
     if angles.ndim < 2 or angles.shape[-1] != 3:
         raise ValueError(f"expected angles of shape (T, ..., 3), got {angles.shape}")
-    out = np.empty_like(angles)
+    out = np.empty_like(angles) if out is None else out
     if len(angles) == 0:
         return out
-    twins = angles + np.array([np.pi, 0.0, np.pi])
-    twins[..., 1] = np.pi - angles[..., 1]
-    two_pi = 2 * np.pi
+    two_pi, half_turns = 2 * np.pi, np.array([np.pi, 0.0, np.pi])
     prev = angles[0]
     out[0] = prev
     for t in range(1, len(angles)):
+        twin = angles[t] + half_turns
+        twin[..., 1] = np.pi - angles[t][..., 1]
         direct = angles[t] + two_pi * np.round((prev - angles[t]) / two_pi)
-        twin = twins[t] + two_pi * np.round((prev - twins[t]) / two_pi)
+        twin = twin + two_pi * np.round((prev - twin) / two_pi)
         use_twin = np.sum((twin - prev) ** 2, axis=-1) < np.sum((direct - prev) ** 2, axis=-1)
         prev = np.where(use_twin[..., None], twin, direct)
         out[t] = prev

@@ -32,6 +32,9 @@ HARMONIZE_STOP = 0.02  # ILVR guidance stops for the last 2 % of the schedule (t
 # Windows per denoiser call: 32 keeps a 10-minute motion's peak memory at about half of
 # 256's with no measurable cost in speed (BENCHMARKS.md, issue 16).
 MAX_WINDOWS_PER_CALL = 32
+# The sampler's state (x_t, x0_hat, noise) is float32, the graph's own precision: a 10-minute
+# motion holds half the memory of float64, and the schedule's coefficients stay float64.
+STATE_DTYPE = np.float32
 
 
 @dataclass(frozen=True)
@@ -139,7 +142,7 @@ class WindowedDenoiser:
         samples, features, _ = x_t.shape
         per_call = max(1, MAX_WINDOWS_PER_CALL // samples)  # windows of every sample in one call
         steps = np.full(samples * per_call, float(t), dtype=np.float32)
-        blended = np.zeros(x_t.shape)
+        blended = np.zeros(x_t.shape, dtype=x_t.dtype)
         # A chunk of windows at a time: memory stays bounded by the chunk, not the length.
         for first in range(0, len(self.starts), per_call):
             chunk = range(first, min(first + per_call, len(self.starts)))
@@ -147,7 +150,7 @@ class WindowedDenoiser:
             batch = windows.transpose(0, 2, 1, 3).reshape(-1, features, self.window).astype(np.float32)
             out = self.denoiser(batch, steps[: len(batch)]).reshape(samples, len(chunk), features, self.window)
             for j, k in enumerate(chunk):
-                blended[:, :, self.spans[k]] += out[:, j].astype(np.float64) * self.weights
+                blended[:, :, self.spans[k]] += out[:, j] * self.weights
         blended *= self.normaliser
         return blended
 
@@ -177,12 +180,24 @@ def fit_guide(array: np.ndarray | None, frames: int, before: int = 0) -> np.ndar
     return np.concatenate([array, pad], axis=-1)
 
 
+def _as_state(array: np.ndarray | None) -> np.ndarray | None:
+    return None if array is None else array.astype(STATE_DTYPE, copy=False)
+
+
 Denoise = Callable[[np.ndarray, int], np.ndarray]  # (x_t (N, F, T), original timestep) -> x0_hat
 
 
-def draw(streams: list[np.random.Generator], shape: tuple[int, ...]) -> np.ndarray:
-    """One standard normal array per sample, each from its own stream: (N, *shape)."""
-    return np.stack([rng.standard_normal(shape) for rng in streams])
+NOISE_CHUNK = 1 << 20  # normals drawn at a time: a float32 draw never holds the float64 whole
+
+
+def draw(streams: list[np.random.Generator], shape: tuple[int, ...], dtype=np.float64) -> np.ndarray:
+    """One standard normal array per sample, each from its own stream: (N, *shape), the
+    stream's float64 normals rounded to `dtype` (the same values whatever the dtype)."""
+    out = np.empty((len(streams), *shape), dtype=dtype)
+    for rng, flat in zip(streams, out.reshape(len(streams), -1)):
+        for start in range(0, flat.size, NOISE_CHUNK):  # a stream's normals come in order: chunks change nothing
+            flat[start : start + NOISE_CHUNK] = rng.standard_normal(min(NOISE_CHUNK, flat.size - start))
+    return out
 
 
 def sample_loop(
@@ -205,7 +220,7 @@ def sample_loop(
         x0 = denoise(x, int(schedule.timesteps[step]))
         if compose is not None:
             x0 = compose(x0)
-        noise = draw(streams, x.shape[1:]) if step > 0 else None
+        noise = draw(streams, x.shape[1:], x.dtype) if step > 0 else None
         if sampler == "ddpm":
             x = schedule.ddpm_step(step, x, x0, noise)
         else:
@@ -225,8 +240,8 @@ def ilvr(schedule: Schedule, reference: np.ndarray, region: np.ndarray, factor: 
     def harmonize(x: np.ndarray, step: int) -> np.ndarray:
         if schedule.timesteps[step] <= stop_t:
             return x
-        noisy_reference = schedule.q_sample(reference, step, draw(streams, x.shape[1:]))
-        return x + region * (low_pass(noisy_reference, factor) - low_pass(x, factor))
+        noisy_reference = schedule.q_sample(reference, step, draw(streams, x.shape[1:], x.dtype))
+        return (x + region * (low_pass(noisy_reference, factor) - low_pass(x, factor))).astype(x.dtype, copy=False)
 
     return harmonize
 
@@ -254,12 +269,12 @@ def sample_features(
     length = denoise.frames
     schedule = Schedule.from_alphas_cumprod(model.alphas_cumprod, options.steps)
     streams = [np.random.default_rng(options.seed + i) for i in range(options.count)]
-    x = draw(streams, (model.features, length))
+    x = draw(streams, (model.features, length), STATE_DTYPE)
     compose = harmonize = None
     if guide is not None:
-        reference = fit_guide(np.asarray(guide.reference, dtype=np.float64), length, margin)
-        keep = fit_guide(guide.keep, length, margin)
-        region = fit_guide(guide.harmonize, length, margin)
+        reference = fit_guide(np.asarray(guide.reference, dtype=STATE_DTYPE), length, margin).astype(STATE_DTYPE)
+        keep = _as_state(fit_guide(guide.keep, length, margin))
+        region = _as_state(fit_guide(guide.harmonize, length, margin))
         if keep is not None:
             compose = lambda x0: x0 * (1.0 - keep) + reference * keep  # noqa: E731
         if region is not None:

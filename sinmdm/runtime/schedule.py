@@ -70,27 +70,27 @@ class Schedule:
 
     def q_sample(self, x0: np.ndarray, step: int, noise: np.ndarray) -> np.ndarray:
         """Noise x0 to chain step `step`."""
-        abar = self.alphas_cumprod[step]
-        return np.sqrt(abar) * x0 + np.sqrt(1 - abar) * noise
+        abar = float(self.alphas_cumprod[step])  # a Python float keeps the arrays' dtype
+        return math.sqrt(abar) * x0 + math.sqrt(1 - abar) * noise
 
     def ddpm_step(self, step: int, x: np.ndarray, x0: np.ndarray, noise: np.ndarray | None) -> np.ndarray:
         """x at chain step `step` - 1 from x at `step` and the predicted x0: the posterior mean,
         plus its fixed-small noise except at the last step (respaced chains: the same formula
         on the respaced coefficients)."""
         c1, c2, log_var = self._posterior
-        mean = c1[step] * x0
-        mean += c2[step] * x  # in place: long motions hold fewer (samples, features, frames) arrays
+        mean = float(c1[step]) * x0  # Python floats keep the state's dtype (float32 or float64)
+        mean += float(c2[step]) * x  # in place: long motions hold fewer (samples, features, frames) arrays
         if step > 0:
-            mean += np.exp(0.5 * log_var[step]) * noise
+            mean += math.exp(0.5 * float(log_var[step])) * noise
         return mean
 
     def ddim_step(self, step: int, x: np.ndarray, x0: np.ndarray, eta: float, noise: np.ndarray | None) -> np.ndarray:
         """DDIM's update (Song et al. eq. 12); `eta` 0 is deterministic, 1 is DDPM-like."""
-        abar = self.alphas_cumprod
-        abar_prev = abar[step - 1] if step > 0 else 1.0
-        eps = (x - np.sqrt(abar[step]) * x0) / np.sqrt(1.0 - abar[step])
-        sigma = eta * np.sqrt((1 - abar_prev) / (1 - abar[step]) * (1 - abar[step] / abar_prev))
-        x = np.sqrt(abar_prev) * x0 + np.sqrt(max(1 - abar_prev - sigma**2, 0.0)) * eps
+        abar = float(self.alphas_cumprod[step])  # Python floats keep the state's dtype
+        abar_prev = float(self.alphas_cumprod[step - 1]) if step > 0 else 1.0
+        eps = (x - math.sqrt(abar) * x0) / math.sqrt(1.0 - abar)
+        sigma = eta * math.sqrt((1 - abar_prev) / (1 - abar) * (1 - abar / abar_prev))
+        x = math.sqrt(abar_prev) * x0 + math.sqrt(max(1 - abar_prev - sigma**2, 0.0)) * eps
         if step > 0 and sigma > 0:
             x = x + sigma * noise
         return x
