@@ -12,7 +12,7 @@ import pytest
 import torch
 
 from sinmdm.export.onnx_export import ALLOWED_OPS, weights_id
-from sinmdm.runtime.model_format import METADATA_KEY, decode_metadata
+from sinmdm.runtime.model_format import METADATA_KEY, decode_metadata, sidecar_path
 from sinmdm.runtime.schedule import cosine_alphas_cumprod
 from sinmdm.train.trainer import load_trained_model
 
@@ -108,3 +108,32 @@ def test_refuses_missing_run_and_unwritable_path(tmp_path, tiny_run):
     (tmp_path / "file").write_text("")
     result = run_cli("sinmdm", "export", str(tiny_run), "--out", str(tmp_path / "file" / "m.onnx"))
     assert result.returncode == 2 and "cannot create output directory" in result.stderr
+
+
+def test_graph_has_no_intermediate_shapes_and_a_sidecar(tiny_model):
+    """Only inputs and outputs are annotated (tract cannot pin the batch otherwise), and the
+    metadata lies beside the graph too, the same document, written with it."""
+    model = onnx.load(tiny_model)
+    assert len(model.graph.value_info) == 0
+    for value in list(model.graph.input) + list(model.graph.output):
+        assert value.type.tensor_type.shape.dim[0].dim_param == "batch"
+    metadata = next(p.value for p in model.metadata_props if p.key == METADATA_KEY)
+    assert sidecar_path(tiny_model) == tiny_model.with_name("tiny_w48.json")
+    assert sidecar_path(tiny_model).read_text(encoding="utf-8") == metadata
+    assert sorted(p.name for p in tiny_model.parent.iterdir()) == ["tiny_w48.json", "tiny_w48.onnx"]
+
+
+def test_demo_model_has_no_intermediate_shapes_and_its_sidecar():
+    from sinmdm.runtime.model import DEMO_MODEL
+
+    model = onnx.load(DEMO_MODEL)
+    assert len(model.graph.value_info) == 0
+    metadata = next(p.value for p in model.metadata_props if p.key == METADATA_KEY)
+    assert sidecar_path(DEMO_MODEL).read_text(encoding="utf-8") == metadata
+
+
+def test_existing_sidecar_refuses_the_export(tiny_run, tmp_path):
+    (tmp_path / "m_w48.json").write_text("{}")
+    result = run_cli("sinmdm", "export", str(tiny_run), "--out", str(tmp_path / "m.onnx"))
+    assert result.returncode == 2 and "m_w48.json exists" in result.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["m_w48.json"]

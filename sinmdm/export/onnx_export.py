@@ -18,7 +18,7 @@ import torch
 from .. import __version__
 from ..runtime.atomic import OutputSet
 from ..runtime.errors import SinMDMError
-from ..runtime.model_format import INPUT_NAMES, METADATA_KEY, OUTPUT_NAME, encode_metadata
+from ..runtime.model_format import INPUT_NAMES, METADATA_KEY, OUTPUT_NAME, encode_metadata, sidecar_path
 from ..runtime.schedule import cosine_alphas_cumprod
 from ..train.trainer import load_trained_model
 
@@ -99,6 +99,10 @@ def _to_onnx(graph: torch.nn.Module, features: int, window: int, opset: int) -> 
         model = version_converter.convert_version(model, opset)
         _drop_attribute(model, "noop_with_empty_axes", keep_on=("ReduceSum",))
     model.ir_version = min(model.ir_version, MAX_IR_VERSION if opset >= 18 else 8)
+    # The exporter annotates ~500 intermediate values with the symbolic `batch`; runtimes that
+    # take them as facts (tract) then cannot run the graph at a fixed batch. Only inputs and
+    # outputs keep their shapes; every runtime infers the rest.
+    del model.graph.value_info[:]
     return model
 
 
@@ -116,6 +120,8 @@ def _drop_attribute(model: onnx.ModelProto, name: str, keep_on: tuple[str, ...])
 
 def _check_graph(model: onnx.ModelProto) -> list[str]:
     onnx.checker.check_model(model, full_check=True)
+    if len(model.graph.value_info):
+        raise SinMDMError("export left intermediate shape annotations in the graph; this is a bug, please report it")
     ops = sorted({node.op_type for node in model.graph.node})
     forbidden = [op for op in ops if op not in ALLOWED_OPS]
     if forbidden:
@@ -153,7 +159,8 @@ def export_run(
     on_warning=None,
     checkpoint: str = "best",
 ) -> list[ExportResult]:
-    """Write `<out stem>_w<W>.onnx` for each window; verify each before it appears."""
+    """Write `<out stem>_w<W>.onnx` and its metadata sidecar `<out stem>_w<W>.json` for each
+    window; verify each before it appears."""
     if opset not in SUPPORTED_OPSETS:
         raise SinMDMError(f"opset {opset} is not supported: use one of {SUPPORTED_OPSETS}")
     model, config = load_trained_model(Path(run_dir), checkpoint=checkpoint)
@@ -168,8 +175,9 @@ def export_run(
         if window < field:
             raise SinMDMError(f"window {window} is shorter than the model's receptive field ({field} frames)")
     targets = {w: window_path(Path(out), w) for w in windows}
-    # every check of the outputs before the export work; all windows appear together
-    with OutputSet(Path(out).parent, [path.name for path in targets.values()], force=force,
+    names = [name for path in targets.values() for name in (path.name, sidecar_path(path).name)]
+    # every check of the outputs before the export work; all windows and sidecars appear together
+    with OutputSet(Path(out).parent, names, force=force,
                    estimate_bytes=4 * int(config["parameters"]) * len(targets)) as output:
         results = [_export_window(model, config, window, path, output, opset, on_warning) for window, path in targets.items()]
         output.commit()
@@ -178,7 +186,7 @@ def export_run(
 
 def _export_window(model: torch.nn.Module, config: dict, window: int, path: Path, output: OutputSet, opset: int,
                    on_warning) -> ExportResult:
-    """Export, check and write (to `output`'s temp file) the graph for one window."""
+    """Export, check and write (to `output`'s temp files) the graph for one window and its sidecar."""
     trained_window, field = int(config["window"]), int(config["receptive_field"])
     features = int(config["model"]["features"])
     graph = _Graph(model).eval()
@@ -226,4 +234,5 @@ def _export_window(model: torch.nn.Module, config: dict, window: int, path: Path
             "nothing was written"
         )
     output.write_bytes(path.name, data)
+    output.write_text(sidecar_path(path).name, metadata)
     return ExportResult(path, window, difference, opset, onnx_model.ir_version, ops, len(data))

@@ -7,6 +7,8 @@ from __future__ import annotations
 
 import json
 import math
+import os
+from pathlib import Path
 from typing import Any, Callable
 
 from .errors import ModelError
@@ -19,6 +21,12 @@ OUTPUT_NAME = "x0"
 MAX_WINDOW = 1 << 16  # frames
 MAX_TIMESTEPS = 100_000
 MAX_FPS = 10_000.0
+
+
+def sidecar_path(onnx_path: str | os.PathLike) -> Path:
+    """Where the metadata document also lies as plain JSON, beside the graph (`m_w64.onnx` ->
+    `m_w64.json`), for runtimes that cannot read ONNX metadata (onnxruntime-node, tract)."""
+    return Path(onnx_path).with_suffix(".json")
 
 
 def encode_metadata(document: dict[str, Any]) -> str:
