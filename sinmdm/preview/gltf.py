@@ -22,6 +22,7 @@ Layout of a written file:
 from __future__ import annotations
 
 import os
+import re
 from pathlib import Path
 from typing import Any
 
@@ -288,17 +289,26 @@ def _bone_mesh(gltf_module: Any, builder: _GLBBuilder, rest_world: np.ndarray, p
 def read_glb(path: str | os.PathLike) -> dict:
     """The skeleton animation of a GLB file with a skin.
 
-    Returns names, parents (-1 for roots; parents precede children), end_sites
-    [(parent index, offset in metres)], frames, fps, times (T,), rotations
-    (T, J, 4; w, x, y, z, the package's order), translations (T, J, 3) and world
-    positions (T, J, 3), in metres. Joints are the skin's joints except the
-    nodes this module marks as End Sites; channels a joint lacks hold its rest
-    transform. Positions follow from those rotations and translations alone (the
+    Returns names, parents (-1 for roots; parents precede children), offsets
+    (J, 3), end_sites [(parent index, offset)], frames, fps, times (T,),
+    rotations (T, J, 4; w, x, y, z, the package's order), translations
+    (T, J, 3) and positions (T, J, 3), all in the file's units (metres for
+    sinmdm's and Blender's). Joints are the skin's joints except its End Sites:
+    the nodes this module marks as such, or, in a file without those marks (a
+    DCC tool such as Blender drops glTF extras unless told to keep them), the
+    leaf joints named "<parent>_end" or "<parent>_end<k>", as written here.
+    The rest pose is the glTF rest pose with every joint's frame aligned with the
+    skeleton's (as in a BVH file): rest rotations a tool gave its bones (Blender
+    points them at their children) are folded into the offsets and the
+    animation, so a skeleton sinmdm wrote comes back with its own offsets and
+    rotations. Channels a joint lacks hold its rest transform; scales are
+    ignored. Positions follow from those rotations and translations alone (the
     skeleton's own frame: a BVH written from them has these positions);
     world_positions (T, J, 3) are where a glTF viewer shows the joints, with the
     rest transforms of the nodes above them applied (such as the node that
-    stands a Z-up clip up). up_axis is the skeleton's own up axis as this module
-    marked it ("y" when unmarked)."""
+    stands a Z-up clip up, or the armature node a tool adds). up_axis is the
+    skeleton's own up axis: as this module marked it, else "z" when the nodes
+    above the skeleton turn its +Z to glTF's +Y, else "y"."""
     gltf_module = import_extra("pygltflib")
     path = Path(path)
     try:
@@ -322,7 +332,7 @@ def read_glb(path: str | os.PathLike) -> dict:
     skin_nodes = set(gltf.skins[0].joints)
     parent_of = {child: k for k, node in enumerate(gltf.nodes) for child in node.children or []}
     order = [k for k in _depth_first(gltf, parent_of) if k in skin_nodes]
-    end_nodes = {k for k in order if (gltf.nodes[k].extras or {}).get(END_SITE_MARK)}
+    end_nodes = _end_site_nodes(gltf, order, parent_of)
     joint_nodes = [k for k in order if k not in end_nodes]
     index_of = {node: j for j, node in enumerate(joint_nodes)}
 
@@ -336,7 +346,9 @@ def read_glb(path: str | os.PathLike) -> dict:
     parents = np.array([joint_parent(k) for k in joint_nodes], dtype=np.int64)
     rest_rotation = np.array([_node_rotation(gltf.nodes[k], path) for k in joint_nodes]).reshape(-1, 4)
     rest_translation = np.array([_node_translation(gltf.nodes[k]) for k in joint_nodes]).reshape(-1, 3)
-    end_sites = [(joint_parent(k), _node_translation(gltf.nodes[k])) for k in sorted(end_nodes, key=order.index)]
+    ends = sorted(end_nodes, key=order.index)
+    end_parents = [joint_parent(k) for k in ends]
+    end_offsets = np.array([_node_translation(gltf.nodes[k]) for k in ends]).reshape(-1, 3)
 
     channels = []
     animation = gltf.animations[0] if gltf.animations else None
@@ -349,7 +361,7 @@ def read_glb(path: str | os.PathLike) -> dict:
                                  accessor(sampler.output).astype(np.float64), sampler.interpolation or "LINEAR"))
     times = max((c[2] for c in channels), key=len, default=np.zeros(1))
     frames = len(times)
-    fps = (animation.extras or {}).get("fps") if animation is not None else None
+    fps = _extras(animation).get("fps") if animation is not None else None
     if fps is None:
         fps = nominal_fps(float(np.median(np.diff(times)))) if frames > 1 else 30.0
 
@@ -361,24 +373,21 @@ def read_glb(path: str | os.PathLike) -> dict:
             rotations[:, joint] = quat_normalize(sampled[:, [3, 0, 1, 2]])
         else:
             translations[:, joint] = sampled
+    offsets = rest_translation
+    if not np.array_equal(rest_rotation, np.tile([1.0, 0.0, 0.0, 0.0], (len(joint_nodes), 1))):
+        rest_world = _rest_world_rotations(quat_to_matrix(quat_normalize(rest_rotation)), parents)
+        above = np.concatenate([np.eye(3)[None], rest_world])[parents + 1]  # each joint's parent, or the skeleton
+        rotations = quat_fix_sign(matrix_to_quat(above @ quat_to_matrix(rotations) @ np.swapaxes(rest_world, -1, -2)))
+        translations = np.einsum("jab,tjb->tja", above, translations)
+        offsets = np.einsum("jab,jb->ja", above, rest_translation)
+        end_offsets = np.einsum("jab,jb->ja", rest_world[end_parents], end_offsets)
     _, positions = forward_kinematics(quat_to_matrix(rotations), translations, parents)
-    world_positions = positions.copy()
-    up_axis = "y"
-    for j, node in enumerate(joint_nodes):
-        if parents[j] >= 0:
-            continue
-        subtree = np.flatnonzero(_root_of(parents) == j)
-        above = np.eye(4)
-        ancestor = parent_of.get(node)
-        while ancestor is not None:
-            above = _node_matrix(gltf.nodes[ancestor]) @ above
-            up_axis = (gltf.nodes[ancestor].extras or {}).get(UP_AXIS_MARK, up_axis)
-            ancestor = parent_of.get(ancestor)
-        world_positions[:, subtree] = positions[:, subtree] @ above[:3, :3].T + above[:3, 3]
+    world_positions, up_axis = _placed(gltf, joint_nodes, parents, parent_of, positions)
     return {
         "names": names,
         "parents": parents,
-        "end_sites": end_sites,
+        "offsets": offsets,
+        "end_sites": list(zip(end_parents, end_offsets)),
         "frames": frames,
         "fps": float(fps),
         "times": times,
@@ -388,6 +397,59 @@ def read_glb(path: str | os.PathLike) -> dict:
         "world_positions": world_positions,
         "up_axis": up_axis,
     }
+
+
+def _end_site_nodes(gltf: Any, order: list[int], parent_of: dict[int, int]) -> set[int]:
+    """The skin's End Site nodes: those marked so, or in a file without marks, the
+    leaf joints named after their parent joint as `_node_names` names them."""
+    marked = {k for k in order if _extras(gltf.nodes[k]).get(END_SITE_MARK)}
+    if marked:
+        return marked
+    joints = set(order)
+    ends = set()
+    for k in order:
+        node, parent = gltf.nodes[k], parent_of.get(k)
+        if parent not in joints or any(c in joints for c in node.children or []):
+            continue
+        if node.name and re.fullmatch(re.escape(gltf.nodes[parent].name or "") + r"_end(\d+)?", node.name):
+            ends.add(k)
+    return ends
+
+
+def _extras(item: Any) -> dict:
+    """A glTF object's extras when they are a JSON object (glTF allows any value there)."""
+    return item.extras if isinstance(item.extras, dict) else {}
+
+
+def _rest_world_rotations(rest: np.ndarray, parents: np.ndarray) -> np.ndarray:
+    """(J, 3, 3) each joint's rest rotation in the skeleton's frame."""
+    world = rest.copy()
+    for j, p in enumerate(parents):
+        if p >= 0:
+            world[j] = world[p] @ rest[j]
+    return world
+
+
+def _placed(gltf: Any, joint_nodes: list[int], parents: np.ndarray, parent_of: dict[int, int],
+            positions: np.ndarray) -> tuple[np.ndarray, str]:
+    """The joints' positions in the glTF world (the rest transforms of the nodes
+    above each root applied) and the skeleton's own up axis."""
+    world_positions = positions.copy()
+    marked, turned = None, False
+    for j, node in enumerate(joint_nodes):
+        if parents[j] >= 0:
+            continue
+        subtree = np.flatnonzero(_root_of(parents) == j)
+        above = np.eye(4)
+        ancestor = parent_of.get(node)
+        while ancestor is not None:
+            above = _node_matrix(gltf.nodes[ancestor]) @ above
+            marked = _extras(gltf.nodes[ancestor]).get(UP_AXIS_MARK, marked)
+            ancestor = parent_of.get(ancestor)
+        world_positions[:, subtree] = positions[:, subtree] @ above[:3, :3].T + above[:3, 3]
+        up = above[:3, 2] / max(float(np.linalg.norm(above[:3, 2])), 1e-12)
+        turned = turned or up[1] > 1 - 1e-4  # a Z-up skeleton stood up, whether or not its mark survived
+    return world_positions, marked or ("z" if turned else "y")
 
 
 def _root_of(parents: np.ndarray) -> np.ndarray:
