@@ -230,13 +230,16 @@ def export(
 
     results = export_run(run_dir, out, windows=window or None, opset=opset, force=force, checkpoint=checkpoint,
                          on_warning=lambda text: console.print(f"[yellow]warning:[/yellow] {text}"))
+    from ..runtime.model_format import sidecar_path
+
     if as_json:
-        print_json([{"path": str(r.path), "window": r.window, "max_abs_diff": r.max_abs_diff, "opset": r.opset,
-                     "ir_version": r.ir_version, "bytes": r.bytes, "ops": r.ops} for r in results])
+        print_json([{"path": str(r.path), "sidecar": str(sidecar_path(r.path)), "window": r.window,
+                     "max_abs_diff": r.max_abs_diff, "opset": r.opset, "ir_version": r.ir_version, "bytes": r.bytes,
+                     "ops": r.ops} for r in results])
         return
     for r in results:
-        console.print(f"wrote [bold]{r.path}[/bold]: window {r.window}, opset {r.opset}, IR {r.ir_version}, "
-                      f"{r.bytes / 1e6:.1f} MB, parity with torch {r.max_abs_diff:.1e}")
+        console.print(f"wrote [bold]{r.path}[/bold] (metadata also in {sidecar_path(r.path).name}): window {r.window}, "
+                      f"opset {r.opset}, IR {r.ir_version}, {r.bytes / 1e6:.1f} MB, parity with torch {r.max_abs_diff:.1e}")
 
 
 def _register_optional_commands() -> None:
