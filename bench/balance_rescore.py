@@ -10,7 +10,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from sinmdm.train.watch import balance, keepable
+from sinmdm.eval.balance import balance, keepable
 
 RESULTS = Path(__file__).resolve().parent / "results" / "watched.json"
 

@@ -8,9 +8,10 @@ from pathlib import Path
 
 import pytest
 
+from sinmdm.eval.balance import balance, in_band
 from sinmdm.eval.metrics import harmonic_mean
 from sinmdm.train.checkpoint import BEST, load_config, read_log
-from sinmdm.train.watch import COPYING, PEAKED, WatchState, balance, in_band
+from sinmdm.train.watch import COPYING, PEAKED, WatchState
 
 from .conftest import DEMO_CLIP, run_cli
 

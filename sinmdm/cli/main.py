@@ -242,6 +242,34 @@ def export(
                       f"opset {r.opset}, IR {r.ir_version}, {r.bytes / 1e6:.1f} MB, parity with torch {r.max_abs_diff:.1e}")
 
 
+@app.command()
+def calibrate(
+    models: list[Path] = typer.Argument(..., help="The model's .onnx windows."),
+    clip: Path = typer.Option(..., "--clip", help="The clip the model learned (checked against its sha256)."),
+    samples: int = typer.Option(6, "--samples", help="Motions per candidate setting (the training watch uses 6)."),
+    source_fps: Optional[float] = typer.Option(None, "--source-fps", help="Override the clip's frame rate."),
+    threads: Optional[int] = typer.Option(None, "--threads", help="onnxruntime threads (default: all cores)."),
+    as_json: bool = typer.Option(False, "--json", help="Print one JSON object."),
+) -> None:
+    """Measure a model's sampling defaults (steps, hop) against its clip and store them in its metadata."""
+    _require_torch()
+    from ..eval.balance import BALANCE_TOLERANCE
+    from ..export.calibrate import calibrate_model
+
+    chosen = calibrate_model(models, clip, samples=samples, source_fps=source_fps, threads=threads)
+    if as_json:
+        print_json(chosen)
+        return
+    table = Table("steps", "hop", "coverage %", "global div", "local div", "jitter (x clip)", "balance", "seconds")
+    for t in chosen["trials"]:
+        table.add_row(str(t["steps"]), str(t["hop"]), f"{t['coverage']:.1f}", f"{t['global_diversity']:.2f}",
+                      f"{t['local_diversity']:.2f}", f"{t['jitter_ratio']:.2f}", f"{t['balance']:.3f}",
+                      f"{t['check_seconds']:.1f}")
+    console.print(table)
+    console.print(f"sampling defaults: {chosen['steps']} steps, hop {chosen['hop']} (the cheapest setting within "
+                  f"{BALANCE_TOLERANCE:g} of the first's balance), written into {', '.join(str(m) for m in models)}")
+
+
 def _register_optional_commands() -> None:
     from .evaluate import register as register_eval
 

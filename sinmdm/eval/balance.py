@@ -1,0 +1,128 @@
+"""The balance a model's samples strike against their clip, and the sampling settings
+chosen by it. Numpy only: the training watch scores torch weights with it, `sinmdm
+calibrate` an exported model.
+
+Balance = min(coverage / 95, global diversity / 1.3, 3 / jitter ratio): every term must hold, so a
+copying model (coverage 100, diversity 1.0: 0.77) and a drifting one (coverage 75,
+diversity 1.9: 0.79) both lose to the paper's own row (98.1 / 1.55: 1.03). Unlike the
+paper's harmonic mean, extra diversity cannot buy back lost coverage, and neither can
+buy back samples that shake (the walk's frame-norm check at 97 % / 1.60 with 5.2x the
+clip's jerk: 0.58, below its GroupNorm check at 91 % / 1.17 / 2.5x: 0.90). A clip too
+static to reach 1.3 is scored by its diversity once coverage holds. Samples that teleport
+(the root jumps more than 1.5x the clip's largest step) are never kept.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+from ..runtime.bvh import BVH
+from ..runtime.errors import SinMDMError
+from ..runtime.generate import generate
+from ..runtime.model import MotionModel
+from ..runtime.options import SamplingOptions
+from . import metrics
+from .motion_features import MIXAMO24_JOINTS, eval_features, protocol_for, resolve_joints
+from .plausibility import TELEPORT_RATIO, plausibility
+
+COVERAGE_BAND = 95.0  # % : below this the model drifts from the clip
+DIVERSITY_BAND = 1.3  # global diversity: below this the model copies
+# Samples (20 steps, no cleanup) shaking more than this many times the clip's own jerk
+# are visibly noisy: every GroupNorm check of the benchmark clips stayed within 0.4-3.7x once
+# past its first check, the frame-norm walk that "won" the band ran at 4.3-13x and walked a
+# jagged path (BENCHMARKS.md). Above it, the balance falls as LIMIT / jitter.
+JITTER_LIMIT = 3.0
+# Sampling settings tried, most expensive first: (steps, hop as a share of the window).
+# The cheapest whose balance stays within BALANCE_TOLERANCE of the first becomes the
+# model's default (export metadata, `sinmdm-run sample`).
+SAMPLING_CANDIDATES = ((50, 0.5), (30, 0.5), (20, 0.5), (20, 0.75))
+BALANCE_TOLERANCE = 0.02
+
+
+def balance(coverage: float, global_diversity: float, jitter_ratio: float | None = None) -> float:
+    """The weakest of the band ratios, jitter's included when it is known."""
+    ratios = [coverage / COVERAGE_BAND, global_diversity / DIVERSITY_BAND]
+    if jitter_ratio:
+        ratios.append(JITTER_LIMIT / jitter_ratio)
+    return float(min(ratios))
+
+
+def in_band(scores: dict) -> bool:
+    return (scores["coverage"] >= COVERAGE_BAND and scores["global_diversity"] >= DIVERSITY_BAND
+            and scores.get("jitter_ratio", 0.0) <= JITTER_LIMIT)
+
+
+def keepable(scores: dict) -> bool:
+    return scores["root_step_max_ratio"] <= TELEPORT_RATIO
+
+
+def eval_preset(reference: BVH) -> str:
+    """The paper's protocol for a Mixamo skeleton, the project's own for any other."""
+    try:
+        resolve_joints(reference.skeleton, MIXAMO24_JOINTS, "contains")
+    except SinMDMError:
+        return "default"
+    return "mixamo24"
+
+
+@dataclass(frozen=True)
+class CheckSettings:
+    samples: int = 6
+    steps: int = 20  # respaced DDPM steps of the check's sampler
+    hop: int | None = None  # None: half a window
+    seed: int = 0
+
+
+class ClipScorer:
+    """Scores samples of a model against its clip: the paper's metrics, the plausibility
+    aggregate and the balance. Samples are drawn with fixed seeds and no foot cleanup, so
+    two scorings differ by the weights or the sampler settings only."""
+
+    def __init__(self, reference: BVH, settings: CheckSettings = CheckSettings(), frames: int | None = None,
+                 fps: float = 30.0, window: int = 64):
+        self.reference, self.settings = reference, settings
+        clip_frames = int(round(reference.frames / reference.fps * fps))
+        self.frames = frames or max(clip_frames, 2 * window)
+        self.preset = eval_preset(reference)
+        self.protocol = protocol_for(reference, self.preset)
+        self.reference_features = eval_features(reference, self.protocol)
+
+    def check(self, model: MotionModel, steps: int | None = None, hop: int | None = None) -> dict:
+        began = time.perf_counter()
+        options = SamplingOptions(count=self.settings.samples, seed=self.settings.seed,
+                                  steps=steps or self.settings.steps, hop=hop or self.settings.hop, cleanup=False)
+        result = generate(model, self.frames, options)
+        return {**self.score(result.clips), "check_seconds": round(time.perf_counter() - began, 2)}
+
+    def score(self, clips: list[BVH]) -> dict:
+        features = [eval_features(c, self.protocol) for c in clips]
+        paper = metrics.evaluate(self.reference_features, features)
+        aggregate = plausibility(self.reference, clips).get("aggregate") or {}
+        scores = {
+            "coverage": round(paper["coverage"], 2),
+            "global_diversity": round(paper["global_diversity"], 4),
+            "local_diversity": round(paper["local_diversity"], 4),
+            "eval_preset": self.preset,
+            "root_step_max_ratio": round(float(aggregate.get("root_step_max_ratio", 0.0)), 3),
+            "foot_skating_cm_s": round(float(aggregate.get("foot_skating_cm_s", 0.0)), 2),
+            "jitter_ratio": round(float(aggregate.get("jitter_ratio", 0.0)), 3),
+            "implausible": int(aggregate.get("implausible", 0)),
+        }
+        scores["balance"] = round(balance(scores["coverage"], scores["global_diversity"], scores["jitter_ratio"]), 4)
+        return scores
+
+
+def choose_sampling(model: MotionModel, scorer: ClipScorer, window: int) -> dict:
+    """Try SAMPLING_CANDIDATES on `model` (the scorer's seeds) and choose the cheapest
+    that keeps the balance: {"steps", "hop", "scores", "trials"}."""
+    trials = []
+    for steps, share in SAMPLING_CANDIDATES:
+        hop = max(1, int(round(window * share)))
+        scores = scorer.check(model, steps=steps, hop=hop)
+        trials.append({"steps": steps, "hop": hop, "cost": steps / share, **scores})
+    reference = trials[0]["balance"]
+    fine = [t for t in trials if t["balance"] >= reference - BALANCE_TOLERANCE and keepable(t)] or trials[:1]
+    chosen = min(fine, key=lambda t: t["cost"])
+    return {"steps": chosen["steps"], "hop": chosen["hop"], "scores": {k: chosen[k] for k in (
+        "coverage", "global_diversity", "local_diversity", "balance", "eval_preset")}, "trials": trials}

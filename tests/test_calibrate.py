@@ -1,0 +1,58 @@
+"""`sinmdm calibrate`: an exported model's sampling defaults measured against its clip and
+written into its metadata and sidecar, the graph itself unchanged."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import onnx
+import pytest
+
+from sinmdm.runtime import load_model
+from sinmdm.runtime.model import DEMO_MODEL
+
+from .conftest import DEMO_CLIP, real_clip, run_cli
+
+
+def _graph_bytes(path: Path) -> bytes:
+    model = onnx.load(str(path))
+    del model.metadata_props[:]
+    return model.SerializeToString()
+
+
+@pytest.fixture
+def demo_copy(tmp_path: Path) -> Path:
+    for source in (DEMO_MODEL, DEMO_MODEL.with_suffix(".json")):
+        shutil.copy(source, tmp_path / source.name)
+    return tmp_path / DEMO_MODEL.name
+
+
+@pytest.mark.slow
+def test_calibrate_writes_the_measured_defaults(demo_copy: Path):
+    result = run_cli("sinmdm", "calibrate", str(demo_copy), "--clip", str(DEMO_CLIP), "--samples", "2",
+                     "--threads", "2", "--json", check=True)
+    chosen = json.loads(result.stdout)
+    assert [(t["steps"], t["hop"]) for t in chosen["trials"]] == [(50, 32), (30, 32), (20, 32), (20, 48)]
+    model = load_model(demo_copy)
+    assert model.metadata["sampling_defaults"] == {"steps": chosen["steps"], "hop": chosen["hop"]}
+    assert model.default_steps == chosen["steps"]
+    provenance = model.metadata["provenance"]
+    assert provenance["sampling_scores"] == chosen["scores"] and provenance["calibrated"]["samples"] == 2
+    stored = next(e.value for e in onnx.load(str(demo_copy)).metadata_props if e.key == "sinmdm")
+    assert demo_copy.with_suffix(".json").read_text() == stored  # the sidecar is the same document
+    assert _graph_bytes(demo_copy) == _graph_bytes(DEMO_MODEL)  # only the metadata changed
+
+
+def test_calibrate_refuses_another_clip(demo_copy: Path):
+    before = demo_copy.read_bytes()
+    result = run_cli("sinmdm", "calibrate", str(demo_copy), "--clip", str(real_clip("Xia_proud.bvh")))
+    assert result.returncode == 2 and "is not the clip this model learned" in result.stderr
+    assert len(result.stderr.strip().splitlines()) == 1
+    assert demo_copy.read_bytes() == before
+
+
+def test_calibrate_refuses_one_sample(demo_copy: Path):
+    result = run_cli("sinmdm", "calibrate", str(demo_copy), "--clip", str(DEMO_CLIP), "--samples", "1")
+    assert result.returncode == 2 and "--samples must be at least 2" in result.stderr
