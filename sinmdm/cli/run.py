@@ -11,8 +11,9 @@ from rich.table import Table
 from rich.tree import Tree
 
 from ..runtime.errors import OptionError
+from ..runtime.options import EDGE_MARGIN
 from .common import RootOption, UpOption, console, print_json, run_app
-from .options import Context, Job, SourceFps, sampling_command
+from .options import Context, Eta, Hop, Job, Json, Margin, Sampler, Seed, SourceFps, Steps, Threads, sampling_command
 
 app = typer.Typer(
     name="sinmdm-run",
@@ -187,6 +188,41 @@ def sample(
 
     return Job(length, lambda progress: generate(model, length, context.options, loop=loop, progress=progress),
                report=report)
+
+
+@app.command()
+def vectors(
+    model: Path = typer.Argument(..., help="The model's .onnx file (one window)."),
+    out: Path = typer.Option(..., "--out", "-o", help="Output directory (new or empty; --force writes into it)."),
+    frames: int = typer.Option(160, "--frames", help="Length of the sample in frames."),
+    seed: Seed = 0,
+    steps: Steps = None,
+    sampler: Sampler = "ddpm",
+    eta: Eta = 0.0,
+    hop: Hop = None,
+    margin: Margin = EDGE_MARGIN,
+    loop: bool = typer.Option(False, "--loop", help="Sample a seamless cycle (circular windows)."),
+    threads: Threads = None,
+    force: bool = typer.Option(False, "--force", help="Write into a non-empty directory, overwriting vectors there."),
+    as_json: Json = False,
+) -> None:
+    """Write golden test vectors of one sample (every step's x_t, x0_hat and noise, the features,
+    the decoded joint positions) as float32 files and a manifest, for ports (docs/runtime.md)."""
+    from ..runtime.model import load_model
+    from ..runtime.options import SamplingOptions, check_length
+    from ..runtime.vectors import write_vectors
+
+    options = SamplingOptions(seed=seed, sampler=sampler, steps=steps, eta=eta, hop=hop, margin=margin)
+    loaded = load_model([model], threads=threads)
+    check_length(frames, loaded.codec.fps)
+    document = write_vectors(loaded, model, out, frames, options, loop=loop, force=force)
+    if as_json:
+        print_json(document)
+        return
+    opts = document["options"]
+    console.print(f"vectors: wrote {len(document['arrays']) + 2} files to [bold]{out}[/bold]: {frames} frames, "
+                  f"seed {seed}, {opts['sampler']} {opts['steps']} steps, hop {opts['hop']}, "
+                  f"{len(document['window_starts'])} window(s) of {document['window']}")
 
 
 def _register_optional_commands() -> None:

@@ -246,6 +246,18 @@ def ilvr(schedule: Schedule, reference: np.ndarray, region: np.ndarray, factor: 
     return harmonize
 
 
+def plan_sampling(model: MotionModel, frames: int, options: SamplingOptions, loop: bool = False
+                  ) -> tuple[SamplingOptions, int, WindowedDenoiser, Schedule]:
+    """What a sample of `frames` frames runs on: the options with the model's defaults
+    filled in, the margin, the windowed denoiser and the (respaced) schedule."""
+    if frames < 1:
+        raise SinMDMError("the length must be at least 1 frame")
+    options = options.resolve(model, frames)
+    margin = 0 if loop else options.margin
+    denoise = WindowedDenoiser(model, frames + 2 * margin, options.hop, loop=loop)
+    return options, margin, denoise, Schedule.from_alphas_cumprod(model.alphas_cumprod, options.steps)
+
+
 def sample_features(
     model: MotionModel,
     frames: int,
@@ -259,15 +271,10 @@ def sample_features(
     frames are sampled before and after the motion (guides extended by 'not kept')
     and cut off; a loop has no ends and ignores it. A guide's reference may also be
     (count, features, frames): one per sample."""
-    if frames < 1:
-        raise SinMDMError("the length must be at least 1 frame")
     if loop and guide is not None:
         raise SinMDMError("loop cannot be combined with guides (applications): sample a loop without one")
-    options = options.resolve(model, frames)
-    margin = 0 if loop else options.margin
-    denoise = WindowedDenoiser(model, frames + 2 * margin, options.hop, loop=loop)
+    options, margin, denoise, schedule = plan_sampling(model, frames, options, loop)
     length = denoise.frames
-    schedule = Schedule.from_alphas_cumprod(model.alphas_cumprod, options.steps)
     streams = [np.random.default_rng(options.seed + i) for i in range(options.count)]
     x = draw(streams, (model.features, length), STATE_DTYPE)
     compose = harmonize = None
