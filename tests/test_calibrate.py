@@ -56,3 +56,9 @@ def test_calibrate_refuses_another_clip(demo_copy: Path):
 def test_calibrate_refuses_one_sample(demo_copy: Path):
     result = run_cli("sinmdm", "calibrate", str(demo_copy), "--clip", str(DEMO_CLIP), "--samples", "1")
     assert result.returncode == 2 and "--samples must be at least 2" in result.stderr
+
+
+@pytest.mark.parametrize("clip", ["missing.bvh", "."])
+def test_calibrate_refuses_an_unreadable_clip(demo_copy: Path, clip: str):
+    result = run_cli("sinmdm", "calibrate", str(demo_copy), "--clip", str(demo_copy.parent / clip))
+    assert result.returncode == 2 and len(result.stderr.strip().splitlines()) == 1

@@ -27,12 +27,12 @@ def calibrate_model(paths: list[str | os.PathLike], clip: str | os.PathLike, sam
     if samples < 2:
         raise SinMDMError(f"--samples must be at least 2 (diversity compares samples), got {samples}")
     model = load_model(paths, threads=threads)
+    reference = read_bvh(clip)  # a missing or unreadable clip is refused here, in one line
     provenance = model.metadata["provenance"]
     expected = provenance.get("clip_sha256")
     if expected and file_sha256(clip) != expected:
         raise SinMDMError(f"{clip} is not the clip this model learned ({provenance.get('clip')!r}, sha256 "
                           f"{str(expected)[:12]}): its defaults are measured against that clip")
-    reference = read_bvh(clip)
     if source_fps:
         reference = BVH(reference.skeleton, 1.0 / source_fps, reference.values, reference.path)
     scorer = ClipScorer(reference, CheckSettings(samples=samples), fps=model.codec.fps, window=model.trained_window)
