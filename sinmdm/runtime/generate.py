@@ -49,7 +49,7 @@ def generate(
     the last frame flowing into the first, the root moving by `GenerationResult.loop_displacement`
     per cycle. `adjust` maps the sampled (count, frames, F) features to the ones decoded and returned."""
     began = time.perf_counter()
-    options = options.resolve(model, frames)
+    options = options.resolve(model, frames, loop)
     features = sample_features(model, frames, options, guide=guide, progress=progress, loop=loop)
     if adjust is not None:
         features = adjust(features)

@@ -100,11 +100,17 @@ class SamplingOptions:
     def seeds(self) -> list[int]:
         return [self.seed + i for i in range(self.count)]
 
-    def resolve(self, model: "MotionModel", frames: int) -> "SamplingOptions":
+    def resolve(self, model: "MotionModel", frames: int, loop: bool = False) -> "SamplingOptions":
         """These options with the model's defaults filled in (steps, hop) and checked
-        against the model (its chain length, its window for `frames`)."""
-        steps = model.default_steps if self.steps is None else self.steps
+        against the model (its chain length, its window for `frames`). A loop takes at
+        least DEFAULT_STEPS and half a window: the model's measured settings are chosen on
+        plain samples, and at 20 steps a loop's wrap changes velocity 1.5x as much as the
+        clip does from frame to frame, at 50 steps and half a window 0.6x (BENCHMARKS.md)."""
+        if self.steps is not None:
+            steps = self.steps
+        else:
+            steps = max(model.default_steps, DEFAULT_STEPS) if loop else model.default_steps
         if steps > len(model.alphas_cumprod):
             raise OptionError("steps", f"must be between 1 and {len(model.alphas_cumprod)}, got {steps}")
-        hop = model.default_hop(frames) if self.hop is None else self.hop
+        hop = (None if loop else model.default_hop(frames)) if self.hop is None else self.hop
         return replace(self, steps=steps, hop=hop)

@@ -252,7 +252,7 @@ def plan_sampling(model: MotionModel, frames: int, options: SamplingOptions, loo
     filled in, the margin, the windowed denoiser and the (respaced) schedule."""
     if frames < 1:
         raise SinMDMError("the length must be at least 1 frame")
-    options = options.resolve(model, frames)
+    options = options.resolve(model, frames, loop)
     margin = 0 if loop else options.margin
     denoise = WindowedDenoiser(model, frames + 2 * margin, options.hop, loop=loop)
     return options, margin, denoise, Schedule.from_alphas_cumprod(model.alphas_cumprod, options.steps)
