@@ -34,7 +34,7 @@ def test_calibrate_writes_the_measured_defaults(demo_copy: Path):
     result = run_cli("sinmdm", "calibrate", str(demo_copy), "--clip", str(DEMO_CLIP), "--samples", "2",
                      "--threads", "2", "--json", check=True)
     chosen = json.loads(result.stdout)
-    assert [(t["steps"], t["hop"]) for t in chosen["trials"]] == [(50, 32), (30, 32), (20, 32), (20, 48)]
+    assert [(t["steps"], t["hop"]) for t in chosen["trials"]] == [(50, 32), (30, 32), (20, 32), (20, 48), (10, 48)]
     model = load_model(demo_copy)
     assert model.metadata["sampling_defaults"] == {"steps": chosen["steps"], "hop": chosen["hop"]}
     assert model.default_steps == chosen["steps"]
