@@ -15,6 +15,7 @@ import numpy as np
 from .bvh import BVH, Skeleton
 from .kinematics import forward_kinematics
 from .rotations import (
+    axis_matrix,
     by_frame_chunks,
     euler_to_matrix,
     matrix_to_euler,
@@ -42,19 +43,6 @@ def nominal_fps(frame_time: float) -> float:
     fps = 1.0 / frame_time
     whole = round(fps)
     return float(whole) if whole > 0 and abs(fps - whole) < 2e-4 * fps else fps
-
-
-def _axis_matrix(axis: str, angle: np.ndarray) -> np.ndarray:
-    c, s = np.cos(angle), np.sin(angle)
-    m = np.zeros(angle.shape + (3, 3))
-    i = AXES.index(axis)
-    j, k = (i + 1) % 3, (i + 2) % 3
-    m[..., i, i] = 1.0
-    m[..., j, j] = c
-    m[..., k, k] = c
-    m[..., j, k] = -s
-    m[..., k, j] = s
-    return m
 
 
 def _full_order(order: str) -> str:
@@ -86,7 +74,7 @@ def animation_from_bvh(bvh: BVH) -> Animation:
         elif order:
             m = np.eye(3)
             for axis, column in zip(order, angles.T):
-                m = m @ _axis_matrix(axis, column)
+                m = m @ axis_matrix(AXES.index(axis), column)
             matrices[:, j] = m
         for column, axis in _position_columns(skeleton, j):
             translations[:, j, axis] = values[:, column]

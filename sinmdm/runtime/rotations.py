@@ -49,7 +49,7 @@ def _axis_indices(order: str) -> tuple[int, int, int]:
     return tuple(_AXIS_INDEX[axis] for axis in order)  # type: ignore[return-value]
 
 
-def _axis_matrix(axis: int, angle: np.ndarray) -> np.ndarray:
+def axis_matrix(axis: int, angle: np.ndarray) -> np.ndarray:
     """Elementary rotation about coordinate axis `axis` by `angle` (..., ) -> (..., 3, 3)."""
     c, s = np.cos(angle), np.sin(angle)
     m = np.zeros(angle.shape + (3, 3))
@@ -76,7 +76,7 @@ def euler_to_matrix(angles: np.ndarray, order: str) -> np.ndarray:
     """(..., 3) radians -> (..., 3, 3); R = R_order[0](a0) @ R_order[1](a1) @ R_order[2](a2)."""
     i, j, k = _axis_indices(order)
     angles = _f64(angles)
-    return _axis_matrix(i, angles[..., 0]) @ _axis_matrix(j, angles[..., 1]) @ _axis_matrix(k, angles[..., 2])
+    return axis_matrix(i, angles[..., 0]) @ axis_matrix(j, angles[..., 1]) @ axis_matrix(k, angles[..., 2])
 
 
 def euler_to_quat(angles: np.ndarray, order: str) -> np.ndarray:
