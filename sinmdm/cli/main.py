@@ -227,11 +227,10 @@ def export(
     """Export the denoiser to ONNX, one verified graph per window length."""
     _require_torch()
     from ..export.onnx_export import export_run
+    from ..runtime.model_format import sidecar_path
 
     results = export_run(run_dir, out, windows=window or None, opset=opset, force=force, checkpoint=checkpoint,
                          on_warning=lambda text: console.print(f"[yellow]warning:[/yellow] {text}"))
-    from ..runtime.model_format import sidecar_path
-
     if as_json:
         print_json([{"path": str(r.path), "sidecar": str(sidecar_path(r.path)), "window": r.window,
                      "max_abs_diff": r.max_abs_diff, "opset": r.opset, "ir_version": r.ir_version, "bytes": r.bytes,

@@ -12,12 +12,11 @@ from pathlib import Path
 import onnx
 
 from ..eval.balance import CheckSettings, ClipScorer, choose_sampling
-from ..runtime.atomic import OutputSet
+from ..runtime.atomic import OutputSet, file_sha256
 from ..runtime.bvh import BVH, read_bvh
 from ..runtime.errors import SinMDMError
 from ..runtime.model import load_model
 from ..runtime.model_format import METADATA_KEY, decode_metadata, encode_metadata, sidecar_path
-from ..train.checkpoint import file_sha256
 
 
 def calibrate_model(paths: list[str | os.PathLike], clip: str | os.PathLike, samples: int = CheckSettings.samples,

@@ -3,6 +3,7 @@ written to exclusive temp files, fsynced, and renamed into place together, or no
 
 from __future__ import annotations
 
+import hashlib
 import os
 import re
 import secrets
@@ -266,7 +267,7 @@ class OutputSet:
         self.write(name, lambda tmp: tmp.write_bytes(data))
 
     def write_text(self, name: str, text: str) -> None:
-        self.write_bytes(name, text.encode("utf-8"))
+        self.write_chunks(name, [text])
 
     def write_chunks(self, name: str, chunks: Iterable[str]) -> None:
         """Text written piece by piece (UTF-8), so it is never held whole."""
@@ -303,6 +304,14 @@ class OutputSet:
 # --------------------------------------------------------------------------- single files
 
 
+def file_sha256(path: str | os.PathLike) -> str:
+    digest = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
+
+
 def check_writable_dir(directory: str | os.PathLike, option: str = "out") -> Path:
     """Create `directory` if needed, check we can write into it, remove stale temps."""
     with OutputSet(directory, [], option=option) as out:
@@ -325,7 +334,7 @@ def write_bytes_atomic(target: str | os.PathLike, data: bytes) -> None:
 
 
 def write_text_atomic(target: str | os.PathLike, text: str) -> None:
-    write_bytes_atomic(target, text.encode("utf-8"))
+    write_chunks_atomic(target, [text])
 
 
 def write_chunks_atomic(target: str | os.PathLike, chunks: Iterable[str]) -> None:

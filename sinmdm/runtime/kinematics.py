@@ -12,7 +12,7 @@ from typing import Sequence
 
 import numpy as np
 
-from .rotations import FRAME_CHUNK
+from .rotations import by_frame_chunks
 
 
 def forward_kinematics(
@@ -93,14 +93,8 @@ def chain_kinematics(
 
 
 def positions_by_chunks(local_rotations: np.ndarray, local_translations: np.ndarray,
-                        parents: Sequence[int] | np.ndarray, chunk: int = FRAME_CHUNK,
-                        out: np.ndarray | None = None) -> np.ndarray:
-    """(T, J, 3) world positions (into `out` when given), forward kinematics `chunk` frames
-    at a time: the global rotations of a long motion are never held whole."""
-    frames = len(local_rotations)
-    if out is None:
-        out = np.empty(local_translations.shape[:1] + local_rotations.shape[1:-2] + (3,))
-    for start in range(0, frames, chunk):
-        part = slice(start, start + chunk)
-        out[part] = forward_kinematics(local_rotations[part], local_translations[part], parents)[1]
-    return out
+                        parents: Sequence[int] | np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+    """(T, J, 3) world positions (into `out` when given), forward kinematics a chunk of
+    frames at a time: the global rotations of a long motion are never held whole."""
+    return by_frame_chunks(lambda rotations, translations: forward_kinematics(rotations, translations, parents)[1],
+                           local_rotations, local_translations, out=out)

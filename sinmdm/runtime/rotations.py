@@ -30,16 +30,18 @@ def _f64(x: np.ndarray) -> np.ndarray:
 FRAME_CHUNK = 2048  # frames per call of `by_frame_chunks`: a 10-minute motion's temporaries stay small
 
 
-def by_frame_chunks(fn, x: np.ndarray, chunk: int = FRAME_CHUNK) -> np.ndarray:
-    """fn applied to x (T, ...) in chunks along axis 0 and concatenated, for per-frame
-    math whose temporaries would otherwise be several copies of the whole motion."""
-    if len(x) <= chunk:
-        return fn(x)
-    first = fn(x[:chunk])
-    out = np.empty((len(x),) + first.shape[1:], dtype=first.dtype)
-    out[:chunk] = first
-    for start in range(chunk, len(x), chunk):
-        out[start : start + chunk] = fn(x[start : start + chunk])
+def by_frame_chunks(fn, *arrays: np.ndarray, chunk: int = FRAME_CHUNK, out: np.ndarray | None = None) -> np.ndarray:
+    """fn(*chunks) over `arrays` (each (T, ...)) in chunks along axis 0, the results
+    concatenated (into `out` when given), for per-frame math whose temporaries would
+    otherwise be several copies of the whole motion."""
+    frames = len(arrays[0])
+    if out is None and frames <= chunk:
+        return fn(*arrays)
+    for start in range(0, frames, chunk):
+        part = fn(*(a[start : start + chunk] for a in arrays))
+        if out is None:
+            out = np.empty((frames,) + part.shape[1:], dtype=part.dtype)
+        out[start : start + chunk] = part
     return out
 
 

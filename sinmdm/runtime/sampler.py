@@ -279,7 +279,7 @@ def sample_features(
     x = draw(streams, (model.features, length), STATE_DTYPE)
     compose = harmonize = None
     if guide is not None:
-        reference = fit_guide(np.asarray(guide.reference, dtype=STATE_DTYPE), length, margin).astype(STATE_DTYPE)
+        reference = _as_state(fit_guide(np.asarray(guide.reference, dtype=np.float64), length, margin))
         keep = _as_state(fit_guide(guide.keep, length, margin))
         region = _as_state(fit_guide(guide.harmonize, length, margin))
         if keep is not None:

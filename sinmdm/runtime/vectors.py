@@ -10,7 +10,6 @@ S - 1 - k (timestep `denoiser_timesteps[k]`).
 
 from __future__ import annotations
 
-import hashlib
 import json
 from dataclasses import dataclass
 from pathlib import Path
@@ -19,7 +18,7 @@ import numpy as np
 
 from .. import __version__
 from .animation import global_positions
-from .atomic import OutputSet
+from .atomic import OutputSet, file_sha256
 from .errors import OptionError
 from .model import MotionModel
 from .options import SamplingOptions
@@ -145,14 +144,6 @@ ARRAY_NOTES = {
 }
 
 
-def _sha256(path: Path) -> str:
-    digest = hashlib.sha256()
-    with open(path, "rb") as file:
-        for block in iter(lambda: file.read(1 << 20), b""):
-            digest.update(block)
-    return digest.hexdigest()
-
-
 def manifest(model: MotionModel, model_path: Path, recording: Recording) -> dict:
     planned = recording.plan
     options, denoise, schedule, frames = planned.options, planned.denoise, planned.schedule, planned.frames
@@ -162,7 +153,7 @@ def manifest(model: MotionModel, model_path: Path, recording: Recording) -> dict
         "format": FORMAT_NAME,
         "format_version": FORMAT_VERSION,
         "sinmdm_version": __version__,
-        "model": {"file": model_path.name, "sha256": _sha256(model_path), "model_id": model.metadata["model_id"]},
+        "model": {"file": model_path.name, "sha256": file_sha256(model_path), "model_id": model.metadata["model_id"]},
         "metadata": METADATA,
         "options": {"frames": frames, "seed": options.seed, "sampler": options.sampler, "steps": options.steps,
                     "eta": options.eta, "hop": denoise.hop, "margin": planned.margin, "loop": planned.loop},

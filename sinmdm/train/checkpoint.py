@@ -9,7 +9,6 @@ from __future__ import annotations
 import hashlib
 import io
 import json
-import os
 from pathlib import Path
 from typing import Any, Iterator
 
@@ -39,14 +38,6 @@ CLIP = {"name": str, "sha256": str, "frames": int}
 WATCH = {"best_step": int, "checks": int}
 SAMPLING = {"steps": int, "hop": int, "scores": dict}
 STAGE = {"dir": str, "norm": str, "steps": int, "from_step": int, "chosen": bool}
-
-
-def file_sha256(path: str | os.PathLike) -> str:
-    digest = hashlib.sha256()
-    with open(path, "rb") as fh:
-        for block in iter(lambda: fh.read(1 << 20), b""):
-            digest.update(block)
-    return digest.hexdigest()
 
 
 def save_run(run_dir: Path, config: dict, state: dict[str, Any], best: dict | None = None) -> dict[str, str]:

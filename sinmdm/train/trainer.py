@@ -15,12 +15,12 @@ import numpy as np
 import torch
 
 from .. import __version__
-from ..runtime.atomic import check_writable_dir, write_text_atomic
+from ..runtime.atomic import check_writable_dir, file_sha256, write_text_atomic
 from ..runtime.bvh import BVH, read_bvh
 from ..runtime.errors import SinMDMError
 from ..runtime.features import MotionCodec, build_codec
 from ..runtime.schedule import NUM_TIMESTEPS
-from .checkpoint import (BEST, CHECKSUMS, CONFIG, LOG, RUN_FORMAT, STAGE_PREFIX, file_sha256, load_best, load_config,
+from .checkpoint import (BEST, CHECKSUMS, CONFIG, LOG, RUN_FORMAT, STAGE_PREFIX, load_best, load_config,
                          load_state, log_records, nonfinite_tensor, save_run)
 from .data import BatchSampler
 from .diffusion import GaussianDiffusion
