@@ -39,6 +39,11 @@ CASES = [(name, None, [], "") for name in SHARED] + [
     ("Joe_Walk-In-Circle.bvh", "static-root-z-up", [], ""),
     ("Joe_Walk-In-Circle.bvh", "static-root-z-up", ["--root", "joint_Root", "--up", "y"], "-as-before"),
     ("Xia_normal.bvh", "static-root", [], ""),
+] + [  # the root velocity in metres per second (runtime.features.model_scale) against the paper's per frame
+    (name, layout, ["--velocity-unit", "second"], "-per-second")
+    for name, layout in (("Joe_Walk-In-Circle.bvh", None), ("Crabnew_Crab-dance-long.bvh", None),
+                         ("Joe_Baseball-Milling-Idle.bvh", None), ("Xia_proud.bvh", None),
+                         ("Joe_Walk-In-Circle.bvh", "static-root-z-up"))
 ]
 
 

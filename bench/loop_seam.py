@@ -59,17 +59,23 @@ def next_cycle(codec, animation: Animation, displacement_m: np.ndarray, frames: 
 
 
 def seam(codec, clip, displacement_m: np.ndarray) -> dict:
-    """Position jump and second difference at the wrap of one decoded clip (file units)."""
+    """Position jump and second difference at the wrap of one decoded clip (file units),
+    and the same two statistics at every pair of consecutive frames inside the sample:
+    the wrap is a seam only if it stands out from the sample's own frames."""
     animation = animation_from_bvh(clip)
     ahead = next_cycle(codec, animation, np.asarray(displacement_m, dtype=np.float64))
     tail = Animation(animation.skeleton, animation.rotations[-2:], animation.translations[-2:], animation.fps)
     p = np.concatenate([global_positions(tail), global_positions(ahead)])  # frames T-2, T-1, T, T+1
     second = max(_mean_norm(p[0] - 2 * p[1] + p[2]), _mean_norm(p[1] - 2 * p[2] + p[3]))
     inside = global_positions(animation)
-    return {"step": float(_mean_norm(p[2] - p[1])), "second": float(second),
-            # the sample's own median second difference away from the wrap: a short-trained
-            # model's motion is jerkier than the clip everywhere, the seam is judged against both
-            "own_second": float(np.median(_mean_norm(np.diff(inside, n=2, axis=0))))}
+    own_steps = _mean_norm(np.diff(inside, axis=0))[1:-1]  # pairs (a-1, a) with a second difference on each side
+    centred = _mean_norm(np.diff(inside, n=2, axis=0))
+    own_seconds = np.maximum(centred[:-1], centred[1:])  # the wrap's statistic at every inner pair
+    step = float(_mean_norm(p[2] - p[1]))
+    return {"step": step, "second": float(second),
+            "own_step": float(np.median(own_steps)), "own_second": float(np.median(own_seconds)),
+            # share of the sample's own frame pairs that change less than the wrap does
+            "step_rank": float(np.mean(own_steps < step)), "second_rank": float(np.mean(own_seconds < second))}
 
 
 def measure(model, clip, samples: int = 8, frames: int | None = None, seed: int = 0, steps: int | None = 50,
@@ -91,7 +97,10 @@ def measure(model, clip, samples: int = 8, frames: int | None = None, seed: int 
                                       "max": float(steps_.max() / reference["step"])},
             "second_over_clip_median": {"median": float(np.median(seconds) / reference["second"]),
                                         "max": float(seconds.max() / reference["second"])},
+            "step_over_own_median": float(np.median(steps_ / np.array([r["own_step"] for r in rows]))),
             "second_over_own_median": float(np.median(seconds / np.array([r["own_second"] for r in rows]))),
+            "step_rank": float(np.median([r["step_rank"] for r in rows])),
+            "second_rank": float(np.median([r["second_rank"] for r in rows])),
             "displacement_m": shifts.tolist(),
         }
     return report
@@ -129,6 +138,9 @@ def main() -> None:
               f"second difference: median {np.median(r['second']):.4g} "
               f"(x{r['second_over_clip_median']['median']:.2f}, max x{r['second_over_clip_median']['max']:.2f}; "
               f"x{r['second_over_own_median']:.2f} of the sample's own)")
+        print(f"{'':8s} against the sample's own frame pairs: step x{r['step_over_own_median']:.2f}, second difference "
+              f"x{r['second_over_own_median']:.2f} of their medians; the wrap changes more than "
+              f"{100 * r['step_rank']:.0f} % / {100 * r['second_rank']:.0f} % of them (median sample)")
     if args.json:
         args.json.write_text(json.dumps(report, indent=2) + "\n")
 

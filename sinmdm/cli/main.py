@@ -52,6 +52,7 @@ def train(
     patience: Optional[int] = typer.Option(None, "--patience", help="Checks without improvement, once in the quality "
                                            "band, before training stops early (default 3; --steps trains to the end)."),
     norm: Optional[str] = typer.Option(None, "--norm", help="group (the paper's GroupNorm over the window) or frame (per-frame, a strictly local model; see BENCHMARKS.md)."),
+    velocity_unit: Optional[str] = typer.Option(None, "--velocity-unit", help="frame (the paper: root velocity in metres per frame) or second (metres per second: the root channels at the rotations' size; see BENCHMARKS.md)."),
 ) -> None:
     """Train a denoiser on one clip."""
     _require_torch()
@@ -60,16 +61,20 @@ def train(
     from dataclasses import replace
 
     from ..train.checkpoint import CONFIG
+    from ..runtime.features import VELOCITY_UNITS
     from ..train.model import NORM_KINDS
     from ..train.presets import preset as get_preset
     from ..train.trainer import kept_sampling, resumed_budget, train as run_training
 
     if norm is not None and norm not in NORM_KINDS:
         raise SinMDMError(f"--norm must be {' or '.join(NORM_KINDS)}, got '{norm}'")
+    if velocity_unit is not None and velocity_unit not in VELOCITY_UNITS:
+        raise SinMDMError(f"--velocity-unit must be {' or '.join(VELOCITY_UNITS)}, got '{velocity_unit}'")
     if check_every is not None and check_every < 0:
         raise SinMDMError(f"--check-every must be 0 (never) or more, got {check_every}")
     config = get_preset(preset).with_overrides(
         steps=steps, width=width, crop=crop, batch=batch, checkpoint_every=checkpoint_every, fps=fps, norm=norm,
+        velocity_unit=velocity_unit,
         early_stop=False if steps else None, patience=patience,  # --steps forces a fixed budget: the watch still keeps the best
     )
     if check_every is not None:

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import ModelError, OptionError, SinMDMError
-from .features import MotionCodec
+from .features import VELOCITY_UNITS, MotionCodec, model_scale
 from .model_format import INPUT_NAMES, METADATA_KEY, OUTPUT_NAME, decode_metadata
 from .options import check_whole
 
@@ -60,6 +60,18 @@ class MotionModel:
     @property
     def features(self) -> int:
         return self.codec.width
+
+    @property
+    def velocity_unit(self) -> str:
+        """What the graph's root velocity channels count in: "frame" (the paper: metres per
+        frame) or "second" (metres per second, a `cpu` preset choice; see model_scale)."""
+        value = self.metadata.get("velocity_unit", "frame")
+        return value if value in VELOCITY_UNITS else "frame"
+
+    @property
+    def scale(self) -> np.ndarray | None:
+        """(F,) factors from features to the graph's space, None where they are all 1."""
+        return model_scale(self.codec, self.velocity_unit)
 
     @property
     def default_steps(self) -> int:

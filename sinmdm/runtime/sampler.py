@@ -277,9 +277,13 @@ def sample_features(
     length = denoise.frames
     streams = [np.random.default_rng(options.seed + i) for i in range(options.count)]
     x = draw(streams, (model.features, length), STATE_DTYPE)
+    scale = model.scale  # features <-> the graph's space (None: the same)
     compose = harmonize = None
     if guide is not None:
-        reference = _as_state(fit_guide(np.asarray(guide.reference, dtype=np.float64), length, margin))
+        reference = np.asarray(guide.reference, dtype=np.float64)
+        if scale is not None:
+            reference = reference * scale[:, None]
+        reference = _as_state(fit_guide(reference, length, margin))
         keep = _as_state(fit_guide(guide.keep, length, margin))
         region = _as_state(fit_guide(guide.harmonize, length, margin))
         if keep is not None:
@@ -288,4 +292,11 @@ def sample_features(
             stop_t = HARMONIZE_STOP * len(model.alphas_cumprod)
             harmonize = ilvr(schedule, reference, region, guide.factor, stop_t, streams)
     x = sample_loop(denoise, schedule, x, streams, options.sampler, options.eta, compose, harmonize, progress)
-    return x[:, :, margin : margin + frames].transpose(0, 2, 1).astype(np.float32)
+    return to_features(x[:, :, margin : margin + frames], scale)
+
+
+def to_features(x: np.ndarray, scale: np.ndarray | None) -> np.ndarray:
+    """(N, F, T) in the graph's space -> (N, T, F) float32 features."""
+    if scale is not None:
+        x = x / scale[:, None].astype(x.dtype)
+    return x.transpose(0, 2, 1).astype(np.float32)

@@ -23,7 +23,7 @@ from .errors import OptionError
 from .model import MotionModel
 from .options import SamplingOptions
 from .rig import skeleton_extent
-from .sampler import STATE_DTYPE, WindowedDenoiser, blend_weights, draw, plan_sampling, sample_loop
+from .sampler import STATE_DTYPE, WindowedDenoiser, blend_weights, draw, plan_sampling, sample_loop, to_features
 from .schedule import Schedule
 
 FORMAT_NAME = "sinmdm-vectors"
@@ -108,7 +108,7 @@ def record(model: MotionModel, planned: Plan) -> Recording:
     x_T = draw([stream], (model.features, length), STATE_DTYPE)
     recorder = RecordingDenoiser(planned.denoise)
     x_0 = sample_loop(recorder, schedule, x_T.copy(), [stream], options.sampler, options.eta)
-    features = x_0[:, :, margin : margin + frames].transpose(0, 2, 1).astype(np.float32)[0]
+    features = to_features(x_0[:, :, margin : margin + frames], model.scale)[0]
 
     size = model.features * length
     normals = stream.normals()
@@ -137,7 +137,7 @@ ARRAY_NOTES = {
     "x_t": "row k: x fed to the windowed denoiser at loop iteration k (row 0 is x_T)",
     "x0_hat": "row k: the blended x0 prediction at loop iteration k",
     "x_0": "the loop's result, margins included",
-    "features": "x_0 without the margins, transposed to (frames, F): what sample_features returns",
+    "features": "x_0 without the margins, divided by the model scale (metadata velocity_unit), transposed to (frames, F): what sample_features returns",
     "local_rotations": "MotionCodec.decode: local rotation matrices, acting on column vectors",
     "local_translations": "MotionCodec.decode: local translations, file units",
     "positions": "forward kinematics of the decoded animation: world joint positions, file units",

@@ -18,7 +18,7 @@ from .. import __version__
 from ..runtime.atomic import check_writable_dir, file_sha256, write_text_atomic
 from ..runtime.bvh import BVH, read_bvh
 from ..runtime.errors import SinMDMError
-from ..runtime.features import MotionCodec, build_codec
+from ..runtime.features import MotionCodec, build_codec, model_scale
 from ..runtime.schedule import NUM_TIMESTEPS
 from .checkpoint import (BEST, CHECKSUMS, CONFIG, LOG, RUN_FORMAT, STAGE_PREFIX, load_best, load_config,
                          load_state, log_records, nonfinite_tensor, save_run)
@@ -112,7 +112,9 @@ class Run:
         self.scheduler = torch.optim.lr_scheduler.LambdaLR(self.optimizer, learning_rate_factor(config))
         self.diffusion = GaussianDiffusion()
         self.generator = torch.Generator().manual_seed(seed)
-        clip_tensor = torch.from_numpy(clip.features.T.copy())
+        scale = model_scale(clip.codec, config.velocity_unit)  # features -> the model's space
+        clip_tensor = torch.from_numpy(np.ascontiguousarray(
+            clip.features.T if scale is None else clip.features.T * scale[:, None], dtype=np.float32))
         self.sampler = BatchSampler(clip_tensor, config, self.generator)
         self.step = 0
         self.watch = WatchState()
@@ -405,7 +407,8 @@ def _second_stage(run: Run) -> TrainConfig | None:
 
 def _quality_watch(run: Run) -> QualityWatch:
     return QualityWatch(run.clip.bvh, run.clip.codec, run.diffusion.alphas_cumprod.numpy(), run.sampler.window,
-                        run.receptive_field, run.clip.start, source_fps=run.clip.info["source_fps"])
+                        run.receptive_field, run.clip.start, source_fps=run.clip.info["source_fps"],
+                        velocity_unit=run.config.velocity_unit)
 
 
 def _check(run: Run, watch: QualityWatch, log, on_check) -> dict | None:

@@ -47,12 +47,13 @@ class QualityWatch:
 
     def __init__(self, reference: BVH, codec, alphas_cumprod: np.ndarray, window: int, receptive_field: int,
                  start: np.ndarray, settings: CheckSettings = CheckSettings(), frames: int | None = None,
-                 source_fps: float | None = None):
+                 source_fps: float | None = None, velocity_unit: str = "frame"):
         if source_fps:  # the clip's real frame rate (--source-fps) for every metric
             reference = BVH(reference.skeleton, 1.0 / source_fps, reference.values, reference.path)
         self.scorer = ClipScorer(reference, settings, frames, codec.fps, window)
         self.codec, self.alphas, self.window, self.receptive_field, self.start = (
             codec, np.asarray(alphas_cumprod, dtype=np.float64), window, receptive_field, start)
+        self.metadata = {"velocity_unit": velocity_unit}  # what the exported model will say of its graph
 
     @property
     def frames(self) -> int:
@@ -61,7 +62,7 @@ class QualityWatch:
     def model(self, module: torch.nn.Module, device: torch.device) -> MotionModel:
         denoiser = TorchWindowDenoiser(module, self.window, device)
         return MotionModel(codec=self.codec, alphas_cumprod=self.alphas, receptive_field=self.receptive_field,
-                           trained_window=self.window, denoisers={self.window: denoiser}, metadata={},
+                           trained_window=self.window, denoisers={self.window: denoiser}, metadata=self.metadata,
                            start_position=np.asarray(self.start, dtype=np.float64))
 
     def check(self, module: torch.nn.Module, device: torch.device, steps: int | None = None,

@@ -15,6 +15,17 @@ function defaultSteps(metadata) {
   return Number.isInteger(value) && value >= 1 && value <= metadata.alphas_cumprod.length ? value : DEFAULT_STEPS;
 }
 
+// Per-feature factors from features to the graph's space: the root's horizontal velocity
+// counts in metres per second when metadata.velocity_unit is "second" (float32, as numpy's).
+function modelScale(metadata, layout, F) {
+  const scale = new Float32Array(F).fill(1);
+  const root = layout.find((b) => b.kind === 'root');
+  if (metadata.velocity_unit === 'second' && root) {
+    scale[root.start] = scale[root.start + 2] = metadata.codec.fps;
+  }
+  return scale;
+}
+
 // options: { frames, steps?, hop?, margin?, loop?, sampler?, eta?, stateDtype? };
 // noise.initial(size) -> x_T values, noise.step(k, size) -> the normals of loop iteration k;
 // onStep(k, t, x_t, x0_hat) is called at every iteration (for checks).
@@ -46,10 +57,11 @@ async function sampleFeatures(ort, session, metadata, options, noise, onStep) {
     else schedule.ddimStep(step, x, x0, options.eta ?? 0, eps, round, next);
     x = next;
   }
-  // cut the margins, transpose (F, T) -> (frames, F)
+  // cut the margins, back from the graph's space (metadata velocity_unit), transpose (F, T) -> (frames, F)
+  const scale = modelScale(metadata, layout, F);
   const features = new Float32Array(frames * F);
-  for (let f = 0; f < F; f++) for (let i = 0; i < frames; i++) features[i * F + f] = x[f * T + margin + i];
+  for (let f = 0; f < F; f++) for (let i = 0; i < frames; i++) features[i * F + f] = x[f * T + margin + i] / scale[f];
   return { features, x, schedule, denoiser, margin, hop };
 }
 
-module.exports = { sampleFeatures, defaultSteps, DEFAULT_STEPS, EDGE_MARGIN };
+module.exports = { sampleFeatures, modelScale, defaultSteps, DEFAULT_STEPS, EDGE_MARGIN };
