@@ -163,6 +163,7 @@ _SCHEMA: dict[str, Check] = {
     "model": _of_type(dict, "an object"),
     "start_position": _optional(_list_of(_number(-1e9, 1e9), 2)),
     "sampling_defaults": _optional(_fields({}, {"steps": _integer(1, MAX_TIMESTEPS), "hop": _integer(1, MAX_WINDOW)})),
+    "velocity_unit": _one_of("frame", "second"),
 }
 
 
