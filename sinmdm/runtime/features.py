@@ -391,9 +391,9 @@ VELOCITY_UNITS = ("frame", "second")
 def model_scale(codec: MotionCodec, velocity_unit: str = "frame") -> np.ndarray | None:
     """(F,) factors taking features (metres per frame) to the space a model is trained and
     sampled in; None for the paper's space (all 1). With "second" the root's horizontal
-    velocity counts in metres per second: at 30 fps a walk's 1-3 cm per frame is a
-    fraction of the denoiser's error on channels of that size, a planted foot slides and
-    the root walks backwards; in metres per second it is the size of the rotations."""
+    velocity counts in metres per second: a walk's 1-3 cm per frame becomes 0.3-1, the size
+    of the 6D rotation values, so the loss weighs it like them. Measured (BENCHMARKS.md):
+    it moved the walk's quality balance, not its foot sliding."""
     if velocity_unit not in VELOCITY_UNITS:
         raise SinMDMError(f"unknown velocity unit {velocity_unit!r}: use one of {', '.join(VELOCITY_UNITS)}")
     if velocity_unit == "frame" or codec.trajectory_joint is None:

@@ -69,7 +69,7 @@ class MotionModel:
         return value if value in VELOCITY_UNITS else "frame"
 
     @property
-    def scale(self) -> np.ndarray | None:
+    def feature_scale(self) -> np.ndarray | None:
         """(F,) factors from features to the graph's space, None where they are all 1."""
         return model_scale(self.codec, self.velocity_unit)
 

@@ -277,7 +277,7 @@ def sample_features(
     length = denoise.frames
     streams = [np.random.default_rng(options.seed + i) for i in range(options.count)]
     x = draw(streams, (model.features, length), STATE_DTYPE)
-    scale = model.scale  # features <-> the graph's space (None: the same)
+    scale = model.feature_scale  # features <-> the graph's space (None: the same)
     compose = harmonize = None
     if guide is not None:
         reference = np.asarray(guide.reference, dtype=np.float64)

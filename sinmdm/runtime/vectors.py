@@ -108,7 +108,7 @@ def record(model: MotionModel, planned: Plan) -> Recording:
     x_T = draw([stream], (model.features, length), STATE_DTYPE)
     recorder = RecordingDenoiser(planned.denoise)
     x_0 = sample_loop(recorder, schedule, x_T.copy(), [stream], options.sampler, options.eta)
-    features = to_features(x_0[:, :, margin : margin + frames], model.scale)[0]
+    features = to_features(x_0[:, :, margin : margin + frames], model.feature_scale)[0]
 
     size = model.features * length
     normals = stream.normals()
