@@ -9,7 +9,6 @@ import numpy as np
 
 from sinmdm.runtime.animation import Animation, animation_from_bvh, animation_to_bvh
 from sinmdm.runtime.bvh import BVH, Skeleton
-from sinmdm.runtime.rotations import matrix_to_quat, quat_to_matrix
 
 SIX_ZXY = ("Xposition", "Yposition", "Zposition", "Zrotation", "Xrotation", "Yrotation")
 # Y-up to Z-up: +90 degrees about X (y -> z, z -> -y), as Blender's exporter sees the world.

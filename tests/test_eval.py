@@ -21,7 +21,7 @@ from sinmdm.runtime.animation import animation_from_bvh
 from sinmdm.runtime.bvh import BVH, Skeleton, read_bvh, write_bvh
 from sinmdm.runtime.errors import SinMDMError
 from sinmdm.runtime.features import build_codec
-from sinmdm.runtime.rotations import matrix_to_6d, quat_to_matrix
+from sinmdm.runtime.rotations import matrix_to_6d
 
 from .conftest import DEMO_CLIP, real_clip, run_cli
 

@@ -3,15 +3,12 @@
 from __future__ import annotations
 
 import json
-import os
 import signal
 import subprocess
 import sys
 import time
 from pathlib import Path
 
-import numpy as np
-import pytest
 import torch
 
 from sinmdm.runtime.bvh import BVH, read_bvh, write_bvh
