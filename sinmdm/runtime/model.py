@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import ModelError, OptionError, SinMDMError
-from .features import VELOCITY_UNITS, MotionCodec, model_scale
+from .features import MotionCodec, model_scale
 from .model_format import INPUT_NAMES, METADATA_KEY, OUTPUT_NAME, decode_metadata
 from .options import check_whole
 
@@ -64,9 +64,9 @@ class MotionModel:
     @property
     def velocity_unit(self) -> str:
         """What the graph's root velocity channels count in: "frame" (the paper: metres per
-        frame) or "second" (metres per second, a `cpu` preset choice; see model_scale)."""
-        value = self.metadata.get("velocity_unit", "frame")
-        return value if value in VELOCITY_UNITS else "frame"
+        frame) or "second" (metres per second, `sinmdm train --velocity-unit second`; see
+        model_scale, which refuses any other value)."""
+        return self.metadata.get("velocity_unit", "frame")
 
     @property
     def feature_scale(self) -> np.ndarray | None:
