@@ -40,6 +40,13 @@ def test_a_teleport_is_named_with_its_frame(walk):
     assert row["verdict"].startswith("teleports") and "frame 200" in row["verdict"]  # 30 fps frame
 
 
+def test_a_smooth_motion_faster_than_the_clip_is_not_called_a_teleport(walk):
+    fast = BVH(walk.skeleton, walk.frame_time, walk.values[::2].copy())  # every step twice as long
+    row = plausibility(walk, [fast])["samples"][0]
+    assert row["root_step_max_ratio"] > 1.5 and row["worst_step_contrast"] < 3
+    assert row["verdict"].startswith("root too fast")
+
+
 def test_walking_backwards_is_named(walk):
     reversed_walk = BVH(walk.skeleton, walk.frame_time, walk.values[::-1].copy())
     row = plausibility(walk, [reversed_walk])["samples"][0]

@@ -28,6 +28,9 @@ BACKWARD_POINTS = 0.05  # share of frames walking backwards beyond the clip's ow
 SKATING_RATIO, SKATING_SLACK_CM_S = 1.5, 2.0
 PENETRATION_CM = 2.0
 JITTER_RATIO = 2.0
+# A step this many times the median of its neighbours (3 frames each side) is a jump out of
+# the motion (a teleport); a fast step among fast steps is a motion faster than the clip's.
+JUMP_CONTRAST = 3.0
 # A root step under this share of the character's size per frame is never a teleport:
 # the floor under the clip's own steps, so a clip whose root barely moves (an idle)
 # does not turn a few millimetres of sway into a "500x" jump.
@@ -54,6 +57,12 @@ def _horizontal(up: int) -> list[int]:
 
 def root_steps(t: Track) -> np.ndarray:
     return np.linalg.norm(np.diff(t.positions[:, 0], axis=0), axis=-1)
+
+
+def step_contrast(steps: np.ndarray, frame: int, reach: int = 3) -> float:
+    """steps[frame] against the median of the steps within `reach` frames of it."""
+    around = np.concatenate([steps[max(0, frame - reach) : frame], steps[frame + 1 : frame + 1 + reach]])
+    return _ratio(float(steps[frame]), float(np.median(around))) if len(around) else 1.0
 
 
 def forward_axis(t: Track, up: int) -> np.ndarray | None:
@@ -119,6 +128,7 @@ def score_sample(ref: Track, sample: Track, codec: MotionCodec, contacts: list[i
         "root_step_p99_ratio": _ratio(np.percentile(steps, 99) if len(steps) else 0,
                                       max(np.percentile(ref_steps, 99) if len(ref_steps) else 0, floor_step)),
         "worst_step_frame": int(steps.argmax()) + 1 if len(steps) else 0,
+        "worst_step_contrast": step_contrast(steps, int(steps.argmax())) if len(steps) else 1.0,
         "speed_distance_m_s": wasserstein_1d(_speeds(sample, up), _speeds(ref, up)),
         "backward_share": backward_share(sample, forward, up),
         "clip_backward_share": backward_share(ref, forward, up),
@@ -134,7 +144,10 @@ def score_sample(ref: Track, sample: Track, codec: MotionCodec, contacts: list[i
 
 def verdict(s: dict) -> str:
     if s["root_step_max_ratio"] > TELEPORT_RATIO:
-        return (f"teleports: root jumps {s['root_step_max_ratio']:.1f}x the clip's largest per-frame step "
+        if s.get("worst_step_contrast", np.inf) > JUMP_CONTRAST:
+            return (f"teleports: root jumps {s['root_step_max_ratio']:.1f}x the clip's largest per-frame step "
+                    f"at frame {s['worst_step_frame']}")
+        return (f"root too fast: {s['root_step_max_ratio']:.1f}x the clip's fastest per-frame step, "
                 f"at frame {s['worst_step_frame']}")
     if s["backward_share"] > s["clip_backward_share"] + BACKWARD_POINTS:
         return f"walks backwards {100 * s['backward_share']:.0f} % of frames (clip: {100 * s['clip_backward_share']:.0f} %)"
