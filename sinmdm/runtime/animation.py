@@ -15,8 +15,8 @@ import numpy as np
 from .bvh import BVH, Skeleton
 from .kinematics import forward_kinematics
 from .rotations import (
+    FRAME_CHUNK,
     axis_matrix,
-    by_frame_chunks,
     euler_to_matrix,
     matrix_to_euler,
     unwrap_euler,
@@ -83,24 +83,37 @@ def animation_from_bvh(bvh: BVH) -> Animation:
 
 def animation_to_bvh(animation: Animation) -> BVH:
     """Channel values on the animation's skeleton, Euler curves unwrapped."""
-    skeleton = animation.skeleton
-    matrices = animation.rotations
-    values = np.zeros((animation.frames, skeleton.num_channels))
+    return chunks_to_bvh(animation.skeleton, animation.fps, animation.frames,
+                         lambda a, b: (animation.rotations[a:b], animation.translations[a:b]))
+
+
+def chunks_to_bvh(skeleton: Skeleton, fps: float, frames: int, chunk_at, chunk: int = FRAME_CHUNK) -> BVH:
+    """Channel values, Euler curves unwrapped, from `chunk_at(a, b)` -> (local rotations
+    (b - a, J, 3, 3), translations (b - a, J, 3)) called for consecutive frame ranges: a
+    long motion is never held whole as matrices, only as the BVH's own values."""
+    values = np.zeros((frames, skeleton.num_channels))
     by_order: dict[str, list[int]] = {}
     for j in range(skeleton.num_joints):
         order = skeleton.rotation_order(j)
         if order:
             by_order.setdefault(order, []).append(j)
-        for column, axis in _position_columns(skeleton, j):
-            values[:, column] = animation.translations[:, j, axis]
-    for order, joints in by_order.items():
-        # Joints with fewer than three rotation channels keep only their own axes.
-        full = _full_order(order)
-        euler = by_frame_chunks(lambda m: matrix_to_euler(m[:, joints], full), matrices)
-        euler = np.degrees(unwrap_euler(euler, full, out=euler), out=euler)
-        for k, j in enumerate(joints):
-            values[:, _rotation_columns(skeleton, j)] = euler[:, k, : len(order)]
-    return BVH(skeleton, 1.0 / animation.fps, values)
+    previous: dict[str, np.ndarray] = {}
+    for a in range(0, frames, chunk):
+        b = min(a + chunk, frames)
+        matrices, translations = chunk_at(a, b)
+        for j in range(skeleton.num_joints):
+            for column, axis in _position_columns(skeleton, j):
+                values[a:b, column] = translations[:, j, axis]
+        for order, joints in by_order.items():
+            # Joints with fewer than three rotation channels keep only their own axes.
+            full = _full_order(order)
+            euler = matrix_to_euler(matrices[:, joints], full)
+            euler = unwrap_euler(euler, full, out=euler, previous=previous.get(order))
+            previous[order] = euler[-1].copy()
+            euler = np.degrees(euler, out=euler)
+            for k, j in enumerate(joints):
+                values[a:b, _rotation_columns(skeleton, j)] = euler[:, k, : len(order)]
+    return BVH(skeleton, 1.0 / fps, values)
 
 
 def global_positions(animation: Animation) -> np.ndarray:

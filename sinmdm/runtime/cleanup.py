@@ -355,9 +355,25 @@ def _solve_leg(local: np.ndarray, translations: np.ndarray, parents: np.ndarray,
     local[still[:, None], changed] = before[still]
 
 
+def cleaned_legs(codec, features: np.ndarray, start: np.ndarray | None = None,
+                 loop_displacement: np.ndarray | None = None, keep: np.ndarray | None = None) -> Animation | None:
+    """The contact cleanup of (T, F) `features` decoded from `start`, solved on the only
+    joints it reads or moves (the contact joints and their ancestors): an animation on
+    that sub-skeleton for `MotionCodec.decode_bvh(replaced=...)`, so that a long motion's
+    other joints (arms, fingers) are never held whole. None when there are no contacts."""
+    if not codec.contact_joints:
+        return None
+    joints = sorted({j for c in codec.contact_joints for j in (c, *ancestors(codec.skeleton, c))})
+    legs, channels = codec.restricted(joints)
+    features = np.asarray(features)[:, channels]
+    keep = None if keep is None else np.asarray(keep)[:, channels]
+    return cleanup_contacts(legs.decode(features, start), legs, features, loop_displacement, keep, in_place=True,
+                            size=codec.size)
+
+
 def cleanup_contacts(animation: Animation, codec, features: np.ndarray,
                      loop_displacement: np.ndarray | None = None, keep: np.ndarray | None = None,
-                     in_place: bool = False) -> Animation:
+                     in_place: bool = False, size: float | None = None) -> Animation:
     """The animation with its contact joints pinned where `features`' contact labels
     (T, F, the sampled features the animation was decoded from) say they touch the
     floor. `loop_displacement`: for a loop, the root's motion per cycle as
@@ -366,7 +382,8 @@ def cleanup_contacts(animation: Animation, codec, features: np.ndarray,
     `keep` (T, F) in [0, 1]: an application's kept features (`Guide.keep`); a leg whose
     rotations are kept is left as the application made it, by the kept share. `in_place`:
     the legs are solved in `animation`'s own rotations and its root moved in its own
-    translations (a caller that owns a long motion saves a copy of each)."""
+    translations (a caller that owns a long motion saves a copy of each). `size`: the
+    character's size in metres when `codec` is of part of it (default `codec.size`)."""
     channels = codec.layout.indices(("contact",))
     contacts = list(codec.contact_joints)
     if not contacts or not len(channels) or animation.frames < MIN_CONTACT_FRAMES:
@@ -378,7 +395,7 @@ def cleanup_contacts(animation: Animation, codec, features: np.ndarray,
     up = codec.up_axis
     parents = animation.skeleton.parents
     positions = positions_by_chunks(animation.rotations, animation.translations, parents)
-    limit = MAX_SLIDE * codec.size / codec.scale
+    limit = MAX_SLIDE * (codec.size if size is None else size) / codec.scale
     inside = np.stack([drop_slides(inside[:, k], positions[:, j], up, limit) for k, j in enumerate(contacts)], axis=1)
     # A foot the model moves slower than the codec's contact speed is planted too, labelled
     # or not: the labels miss the ends of many contacts, and those frames slide visibly.

@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .animation import Animation, animation_from_bvh, animation_to_bvh, global_positions
+from .animation import Animation, animation_from_bvh, chunks_to_bvh, global_positions
 from .bvh import BVH, MAX_FRAME_TIME, MAX_JOINT_FRAMES, MIN_FRAME_TIME, Skeleton
 from .contacts import contact_labels, default_contact_speed, detect_contact_joints
 from .errors import OptionError, SinMDMError
@@ -306,40 +306,97 @@ class MotionCodec:
         return animation.translations[0, self.trajectory_joint, list(self.horizontal_axes)] * self.scale
 
     # ------------------------------------------------------------------ decode
-    def decode(self, features: np.ndarray, start: np.ndarray | None = None) -> Animation:
-        """Animation at the codec's frame rate from (T, F) features; the root path is
-        re-integrated from `start` (horizontal, metres, default the origin)."""
+    def _checked(self, features: np.ndarray) -> np.ndarray:
         features = np.asarray(features)
         if features.ndim != 2 or features.shape[1] != self.width:
             raise SinMDMError(f"features have shape {features.shape}, expected (frames, {self.width})")
-        frames, joints = features.shape[0], self.skeleton.num_joints
+        return features
+
+    def local_rotations(self, features: np.ndarray) -> np.ndarray:
+        """(T, J, 3, 3) local rotations of (T, F) features (rest rotations where not features)."""
         rest = np.eye(3) if self.rest_rotations is None else self.rest_rotations
-        rot, rotating = self.layout.indices(("rotation",)), self.rotation_joints
+        matrices = np.broadcast_to(rest, (len(features), self.skeleton.num_joints, 3, 3)).copy()
+        rot = self.layout.indices(("rotation",))
+        matrices[:, self.rotation_joints] = sixd_to_matrix(features[:, rot].reshape(len(features), -1, 6))
+        return matrices
 
-        def local_rotations(chunk: np.ndarray) -> np.ndarray:  # (n, F) -> (n, J, 3, 3)
-            matrices = np.broadcast_to(rest, (len(chunk), joints, 3, 3)).copy()
-            matrices[:, rotating] = sixd_to_matrix(chunk[:, rot].reshape(len(chunk), -1, 6))
-            return matrices
-
-        matrices = by_frame_chunks(local_rotations, features)
-        translations = np.broadcast_to(self.rest_translations, (frames, joints, 3)).copy()
+    def local_translations(self, features: np.ndarray, path: np.ndarray | None) -> np.ndarray:
+        """(T, J, 3) local translations, file units, of (T, F) features and the trajectory
+        joint's (T, 3) `path` in metres (`root_path`)."""
+        frames = len(features)
+        translations = np.broadcast_to(self.rest_translations, (frames, self.skeleton.num_joints, 3)).copy()
         if self.translation_joints:
-            tr = self.layout.indices(("translation",))
-            metres = features[:, tr].astype(np.float64).reshape(frames, -1, 3)
+            metres = features[:, self.layout.indices(("translation",))].astype(np.float64).reshape(frames, -1, 3)
             translations[:, list(self.translation_joints)] = metres / self.scale
-        if self.trajectory_joint is not None:
-            dx, y, dz = features[:, self.layout.indices(("root",))].astype(np.float64).T
-            origin = np.zeros(2) if start is None else np.asarray(start, dtype=np.float64)
-            x = origin[0] + np.concatenate([[0.0], np.cumsum(dx[1:])])
-            z = origin[1] + np.concatenate([[0.0], np.cumsum(dz[1:])])
-            h1, h2 = self.horizontal_axes
-            path = np.zeros((frames, 3))
-            path[:, h1], path[:, self.height_axis], path[:, h2] = x, y, z
+        if path is not None:
             translations[:, self.trajectory_joint] = path / self.scale
+        return translations
+
+    def root_path(self, features: np.ndarray, start: np.ndarray | None = None) -> np.ndarray | None:
+        """(T, 3) metres: the trajectory joint's path, integrated from `start` (horizontal,
+        default the origin) over the velocities of frames 1..T-1; None without one."""
+        if self.trajectory_joint is None:
+            return None
+        dx, y, dz = features[:, self.layout.indices(("root",))].astype(np.float64).T
+        origin = np.zeros(2) if start is None else np.asarray(start, dtype=np.float64)
+        h1, h2 = self.horizontal_axes
+        path = np.zeros((len(features), 3))
+        path[:, h1] = origin[0] + np.concatenate([[0.0], np.cumsum(dx[1:])])
+        path[:, self.height_axis] = y
+        path[:, h2] = origin[1] + np.concatenate([[0.0], np.cumsum(dz[1:])])
+        return path
+
+    def decode(self, features: np.ndarray, start: np.ndarray | None = None) -> Animation:
+        """Animation at the codec's frame rate from (T, F) features; the root path is
+        re-integrated from `start` (horizontal, metres, default the origin)."""
+        features = self._checked(features)
+        matrices = by_frame_chunks(self.local_rotations, features)
+        translations = self.local_translations(features, self.root_path(features, start))
         return Animation(self.skeleton, matrices, translations, self.fps)
 
-    def decode_bvh(self, features: np.ndarray, start: np.ndarray | None = None) -> BVH:
-        return animation_to_bvh(self.decode(features, start))
+    def decode_bvh(self, features: np.ndarray, start: np.ndarray | None = None,
+                   replaced: Animation | None = None) -> BVH:
+        """`animation_to_bvh(decode(features, start))` a chunk of frames at a time: a long
+        motion is never held whole as matrices. `replaced`: an animation of some joints
+        (a skeleton whose joint names are this one's) whose rotations and translations
+        take the place of the decoded ones (the contact cleanup's legs)."""
+        features = self._checked(features)
+        path = self.root_path(features, start)
+        names = self.skeleton.names
+        joints = [] if replaced is None else [names.index(n) for n in replaced.skeleton.names]
+
+        def chunk_at(a: int, b: int) -> tuple[np.ndarray, np.ndarray]:
+            rotations = self.local_rotations(features[a:b])
+            translations = self.local_translations(features[a:b], None if path is None else path[a:b])
+            if joints:
+                rotations[:, joints] = replaced.rotations[a:b]
+                translations[:, joints] = replaced.translations[a:b]
+            return rotations, translations
+
+        return chunks_to_bvh(self.skeleton, self.fps, len(features), chunk_at)
+
+    def restricted(self, joints: list[int]) -> tuple["MotionCodec", np.ndarray]:
+        """This codec on the sub-skeleton of `joints` (each with its parent, in file order)
+        and the indices of this codec's feature channels that make its features."""
+        at = {j: i for i, j in enumerate(joints)}
+        skeleton = self.skeleton
+        sub = Skeleton(
+            tuple(skeleton.names[j] for j in joints),
+            np.array([at[skeleton.parents[j]] if skeleton.parents[j] >= 0 else -1 for j in joints]),
+            skeleton.offsets[joints],
+            tuple(skeleton.channels[j] for j in joints),
+            tuple((at[p], o) for p, o in skeleton.end_sites if p in at),
+        )
+        codec = MotionCodec(
+            sub, self.fps, self.scale, None if self.trajectory_joint is None else at[self.trajectory_joint],
+            tuple(at[j] for j in self.translation_joints if j in at), tuple(at[j] for j in self.contact_joints if j in at),
+            self.contact_speed, np.asarray(self.rest_translations)[joints], self.resample, self.up_axis,
+            self.height_axis, tuple(at[j] for j in self.fixed_joints if j in at),
+            None if self.rest_rotations is None else np.asarray(self.rest_rotations)[joints],
+        )
+        blocks = {(b.kind, b.joint): b for b in self.layout.blocks}
+        channels = [np.arange(blocks[b.kind, b.joint].start, blocks[b.kind, b.joint].stop) for b in codec.layout.blocks]
+        return codec, np.concatenate(channels) if channels else np.zeros(0, dtype=np.int64)
 
     # ----------------------------------------------------------- serialise
     def to_dict(self) -> dict:

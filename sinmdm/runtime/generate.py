@@ -15,9 +15,8 @@ from typing import Callable
 
 import numpy as np
 
-from .animation import animation_to_bvh
 from .bvh import BVH
-from .cleanup import cleanup_contacts
+from .cleanup import cleaned_legs
 from .model import MotionModel
 from .options import SamplingOptions
 from .sampler import Guide, cycle_displacement, fit_guide, sample_features
@@ -66,8 +65,8 @@ def decode_clip(model: MotionModel, features: np.ndarray, start: np.ndarray | No
                 loop_displacement: np.ndarray | None = None, keep: np.ndarray | None = None) -> BVH:
     """One sample's features (frames, F) as a BVH clip, its contacts cleaned up when asked
     (except where `keep`, a guide's (F, frames) kept features, holds the legs)."""
-    animation = model.codec.decode(features, start)
+    legs = None
     if cleanup:
         kept = None if keep is None else np.broadcast_to(fit_guide(keep, len(features)), features.shape[::-1]).T
-        animation = cleanup_contacts(animation, model.codec, features, loop_displacement, kept, in_place=True)
-    return animation_to_bvh(animation)
+        legs = cleaned_legs(model.codec, features, start, loop_displacement, kept)
+    return model.codec.decode_bvh(features, start, replaced=legs)

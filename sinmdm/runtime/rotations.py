@@ -138,7 +138,8 @@ def _wrap_to_pi(angles: np.ndarray) -> np.ndarray:
     return np.where(angles > np.pi, angles - 2 * np.pi, np.where(angles < -np.pi, angles + 2 * np.pi, angles))
 
 
-def unwrap_euler(angles: np.ndarray, order: str, out: np.ndarray | None = None) -> np.ndarray:
+def unwrap_euler(angles: np.ndarray, order: str, out: np.ndarray | None = None,
+                 previous: np.ndarray | None = None) -> np.ndarray:
     """Make Euler curves (T, ..., 3) continuous along time axis 0.
 
     Every Tait-Bryan triple (a, b, c) has a twin (a + pi, pi - b, c + pi) giving
@@ -146,6 +147,8 @@ def unwrap_euler(angles: np.ndarray, order: str, out: np.ndarray | None = None) 
     kept; every later frame takes whichever of the two solutions, shifted per
     component by multiples of 2 pi, lies closest (L2) to the previous frame.
     `out` (float64, angles' shape) may be `angles` itself: each frame is read before it is written.
+    `previous` (..., 3): the unwrapped frame before these (a long curve unwrapped a chunk
+    at a time), so frame 0 is unwrapped against it too.
     """
     _axis_indices(order)  # validate; the twin formula is the same for all orders
     angles = _f64(angles)
@@ -155,9 +158,12 @@ def unwrap_euler(angles: np.ndarray, order: str, out: np.ndarray | None = None) 
     if len(angles) == 0:
         return out
     two_pi, half_turns = 2 * np.pi, np.array([np.pi, 0.0, np.pi])
-    prev = angles[0]
-    out[0] = prev
-    for t in range(1, len(angles)):
+    if previous is None:
+        prev = angles[0]
+        out[0] = prev
+    else:
+        prev = np.asarray(previous, dtype=np.float64)
+    for t in range(0 if previous is not None else 1, len(angles)):
         twin = angles[t] + half_turns
         twin[..., 1] = np.pi - angles[t][..., 1]
         direct = angles[t] + two_pi * np.round((prev - angles[t]) / two_pi)

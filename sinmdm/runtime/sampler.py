@@ -216,13 +216,16 @@ def sample_loop(
     (not at the last step); the DDPM or DDIM update; then harmonize(x, step - 1) (not after
     the last step). Hooks that draw noise use the same per-sample streams, after the step's own."""
     total = len(schedule.timesteps)
+    owned = False  # x is the caller's until the first update makes a new one
     for step in reversed(range(total)):
         x0 = denoise(x, int(schedule.timesteps[step]))
         if compose is not None:
             x0 = compose(x0)
         noise = draw(streams, x.shape[1:], x.dtype) if step > 0 else None
         if sampler == "ddpm":
-            x = schedule.ddpm_step(step, x, x0, noise)
+            in_place = owned and x.shape == x0.shape and x.dtype == x0.dtype
+            x = schedule.ddpm_step(step, x, x0, noise, out=x if in_place else None)
+            owned = True
         else:
             x = schedule.ddim_step(step, x, x0, eta, noise)
         if harmonize is not None and step > 0:

@@ -10,6 +10,7 @@ from functools import cached_property
 import numpy as np
 
 NUM_TIMESTEPS = 1000
+UPDATE_FRAMES = 4096  # frames per block of the DDPM update
 
 
 def cosine_alphas_cumprod(num_timesteps: int = NUM_TIMESTEPS, s: float = 0.008) -> np.ndarray:
@@ -73,16 +74,24 @@ class Schedule:
         abar = float(self.alphas_cumprod[step])  # a Python float keeps the arrays' dtype
         return math.sqrt(abar) * x0 + math.sqrt(1 - abar) * noise
 
-    def ddpm_step(self, step: int, x: np.ndarray, x0: np.ndarray, noise: np.ndarray | None) -> np.ndarray:
+    def ddpm_step(self, step: int, x: np.ndarray, x0: np.ndarray, noise: np.ndarray | None,
+                  out: np.ndarray | None = None) -> np.ndarray:
         """x at chain step `step` - 1 from x at `step` and the predicted x0: the posterior mean,
         plus its fixed-small noise except at the last step (respaced chains: the same formula
-        on the respaced coefficients)."""
+        on the respaced coefficients). `out` may be `x` itself when the caller owns it."""
         c1, c2, log_var = self._posterior
-        mean = float(c1[step]) * x0  # Python floats keep the state's dtype (float32 or float64)
-        mean += float(c2[step]) * x  # in place: long motions hold fewer (samples, features, frames) arrays
-        if step > 0:
-            mean += math.exp(0.5 * float(log_var[step])) * noise
-        return mean
+        a, b = float(c1[step]), float(c2[step])  # Python floats keep the state's dtype (float32 or float64)
+        sigma = math.exp(0.5 * float(log_var[step])) if step > 0 else None
+        out = np.empty_like(x0, shape=x.shape) if out is None else out
+        # a block of frames at a time: a long motion holds no temporary the size of its state
+        for first in range(0, x.shape[-1], UPDATE_FRAMES):
+            block = (..., slice(first, first + UPDATE_FRAMES))
+            mean = a * x0[block]
+            mean += b * x[block]
+            if sigma is not None:
+                mean += sigma * noise[block]
+            out[block] = mean
+        return out
 
     def ddim_step(self, step: int, x: np.ndarray, x0: np.ndarray, eta: float, noise: np.ndarray | None) -> np.ndarray:
         """DDIM's update (Song et al. eq. 12); `eta` 0 is deterministic, 1 is DDPM-like."""
