@@ -274,6 +274,37 @@ def calibrate(
                   f"{BALANCE_TOLERANCE:g} of the first's balance), written into {', '.join(str(m) for m in models)}")
 
 
+@app.command()
+def quantize(
+    models: list[Path] = typer.Argument(..., help="The model's .onnx windows (float32, as exported)."),
+    clip: Path = typer.Option(..., "--clip", help="The clip the model learned: the quality check scores against it."),
+    samples: int = typer.Option(12, "--samples", help="Motions sampled with each graph for the quality check."),
+    source_fps: Optional[float] = typer.Option(None, "--source-fps", help="Override the clip's frame rate."),
+    threads: Optional[int] = typer.Option(None, "--threads", help="onnxruntime threads (default: all cores)."),
+    out: Optional[Path] = typer.Option(None, "--out", "-o", help="Folder for the _int8 files (default: beside the model)."),
+    force: bool = typer.Option(False, "--force", help="Replace existing _int8 files."),
+    as_json: bool = typer.Option(False, "--json", help="Print one JSON object."),
+) -> None:
+    """Write a faster mixed-precision copy of each window (MODEL_w64_int8.onnx: int8 convolutions
+    for the noisy steps, float32 for the last ones), only if it keeps the model's quality."""
+    _require_torch()
+    from ..export.quantize import quantize_model
+
+    checked = quantize_model(models, clip, samples=samples, source_fps=source_fps, threads=threads, force=force,
+                             out=out)
+    if as_json:
+        print_json(checked)
+        return
+    table = Table("graph", "coverage %", "global div", "local div", "jitter (x clip)", "balance", "check seconds")
+    for name in ("float32", "mixed"):
+        s = checked[name]
+        table.add_row(name, f"{s['coverage']:.1f}", f"{s['global_diversity']:.2f}", f"{s['local_diversity']:.2f}",
+                      f"{s['jitter_ratio']:.2f}", f"{s['balance']:.3f}", f"{s['check_seconds']:.1f}")
+    console.print(table)
+    console.print(f"{checked['samples']} samples each at {checked['steps']} steps, hop {checked['hop']}; int8 above "
+                  f"t = {checked['int8_above_t']}; written: {', '.join(checked['outputs'])}")
+
+
 def _register_optional_commands() -> None:
     from .evaluate import register as register_eval
 

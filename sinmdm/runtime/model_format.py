@@ -164,6 +164,8 @@ _SCHEMA: dict[str, Check] = {
     "start_position": _optional(_list_of(_number(-1e9, 1e9), 2)),
     "sampling_defaults": _optional(_fields({}, {"steps": _integer(1, MAX_TIMESTEPS), "hop": _integer(1, MAX_WINDOW)})),
     "velocity_unit": _one_of("frame", "second"),
+    # mixed precision (`sinmdm quantize`): int8 convolutions while t > int8_above_t
+    "precision": _optional(_fields({"int8_above_t": _integer(0, MAX_TIMESTEPS)})),
 }
 
 
