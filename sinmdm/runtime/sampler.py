@@ -230,6 +230,7 @@ def sample_loop(
             x = schedule.ddim_step(step, x, x0, eta, noise)
         if harmonize is not None and step > 0:
             x = harmonize(x, step - 1)
+        x0 = noise = None  # not held while the next denoise call builds its own (a long motion's peak)
         if progress:
             progress(total - step, total)
     return x
