@@ -93,3 +93,20 @@ def test_the_ddpm_update_in_place_gives_the_same_values():
         if step:
             mean += np.exp(0.5 * schedule.posterior()[2][step]) * noise
         np.testing.assert_allclose(expected, mean, rtol=1e-6, atol=1e-6)
+
+
+def test_free_heap_is_returned_after_a_long_motion_only(monkeypatch):
+    from sinmdm.runtime import heap
+
+    calls = []
+    monkeypatch.setattr(heap, "_malloc_trim", lambda: calls.append)
+    heap.release_free_heap(heap.LONG_MOTION_VALUES - 1)
+    assert calls == []
+    heap.release_free_heap(heap.LONG_MOTION_VALUES)
+    assert calls == [0]
+
+
+def test_free_heap_release_runs_on_this_platform():
+    from sinmdm.runtime.heap import LONG_MOTION_VALUES, release_free_heap
+
+    release_free_heap(LONG_MOTION_VALUES)  # glibc: malloc_trim; elsewhere nothing, never an error

@@ -17,6 +17,7 @@ import numpy as np
 
 from .bvh import BVH
 from .cleanup import cleaned_legs
+from .heap import release_free_heap
 from .model import MotionModel
 from .options import SamplingOptions
 from .sampler import Guide, cycle_displacement, fit_guide, sample_features
@@ -50,6 +51,7 @@ def generate(
     began = time.perf_counter()
     options = options.resolve(model, frames, loop)
     features = sample_features(model, frames, options, guide=guide, progress=progress, loop=loop)
+    release_free_heap(features.size)
     if adjust is not None:
         features = adjust(features)
     origin = model.start_position if start is None else start
@@ -57,6 +59,7 @@ def generate(
     keep = None if guide is None else guide.keep
     clips = [decode_clip(model, f, origin, options.cleanup, None if displacement is None else displacement[i], keep)
              for i, f in enumerate(features)]
+    release_free_heap(features.size)
     return GenerationResult(features, clips, options.seeds, time.perf_counter() - began, options,
                             loop_displacement=displacement)
 
