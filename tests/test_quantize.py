@@ -17,6 +17,7 @@ from sinmdm.runtime.errors import SinMDMError
 from sinmdm.runtime.model import DEMO_MODEL
 
 from .conftest import DEMO_CLIP, real_clip, run_cli
+from .test_runtimes import ort_node  # noqa: F401 (the fixture)
 
 
 def _copy_demo(directory: Path) -> Path:
@@ -122,3 +123,25 @@ def test_tract_runs_the_mixed_graph_as_onnxruntime_does(mixed):
     for t in (0.0, 10.0, 500.0, 999.0):
         steps = np.full(2, t, dtype=np.float32)
         assert np.abs(tract(x, steps) - float32(x, steps)).max() <= 1e-4, t
+
+
+def test_onnxruntime_node_runs_the_mixed_graph(mixed, ort_node, tmp_path):
+    import os
+    import subprocess
+
+    from .test_runtimes import ORT_NODE_SCRIPT, _onnxruntime, _write_cases
+
+    _, target, _ = mixed
+    features = load_model(target).features
+    rng = np.random.default_rng(6)
+    cases = [(rng.standard_normal((2, features, 64)).astype(np.float32), np.full(2, t, dtype=np.float32))
+             for t in (0.0, 10.0, 500.0, 999.0)]  # every item of a call at one step, as the sampler sends them
+    expected = _onnxruntime(target, cases)
+    _write_cases(tmp_path, cases)
+    (tmp_path / "run.js").write_text(ORT_NODE_SCRIPT)
+    env = dict(os.environ, NODE_PATH=str(ort_node / "node_modules"))
+    result = subprocess.run(["node", str(tmp_path / "run.js"), str(target), str(tmp_path)],
+                            capture_output=True, text=True, env=env, timeout=300)
+    assert result.returncode == 0, result.stderr
+    got = np.frombuffer((tmp_path / "x0.bin").read_bytes(), dtype="<f4").reshape((len(cases), *expected[0].shape))
+    assert max(float(np.abs(g - e).max()) for g, e in zip(got, expected)) <= 1e-5
