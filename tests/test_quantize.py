@@ -145,3 +145,20 @@ def test_onnxruntime_node_runs_the_mixed_graph(mixed, ort_node, tmp_path):
     assert result.returncode == 0, result.stderr
     got = np.frombuffer((tmp_path / "x0.bin").read_bytes(), dtype="<f4").reshape((len(cases), *expected[0].shape))
     assert max(float(np.abs(g - e).max()) for g, e in zip(got, expected)) <= 1e-5
+
+
+@pytest.mark.slow
+def test_every_window_of_a_model_gets_its_mixed_copy(tiny_run, tmp_path, monkeypatch):
+    monkeypatch.setattr(quantize, "JITTER_TOLERANCE", 1.0)  # a 10-step model's noise: the windows are tested here
+    run_cli("sinmdm", "export", str(tiny_run), "--out", str(tmp_path / "tiny.onnx"), "--window", "48",
+            "--window", "96", check=True)
+    windows = [tmp_path / "tiny_w48.onnx", tmp_path / "tiny_w96.onnx"]
+    inputs = quantize.calibration_inputs(load_model(windows), 60, samples=1)
+    assert sorted(inputs) == [48, 96] and all(inputs[w] for w in inputs)
+    assert {batch["x_t"].shape[-1] for batch in inputs[96]} == {96}
+    checked = quantize.quantize_model(windows, DEMO_CLIP, samples=2, threads=2)
+    mixed = load_model([tmp_path / "tiny_w48_int8.onnx", tmp_path / "tiny_w96_int8.onnx"])
+    assert sorted(mixed.denoisers) == [48, 96] and len(checked["outputs"]) == 2
+    x = np.random.default_rng(0).standard_normal((1, mixed.features, 96)).astype(np.float32)
+    float32 = load_model(windows[1]).denoisers[96]
+    np.testing.assert_allclose(mixed.denoisers[96](x, np.zeros(1, np.float32)), float32(x, np.zeros(1, np.float32)), atol=1e-5)

@@ -18,6 +18,7 @@ balance falls more than BALANCE_TOLERANCE or its jitter rises more than JITTER_T
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import os
 import tempfile
@@ -66,18 +67,13 @@ class _Recorder:
 def calibration_inputs(model: MotionModel, frames: int, samples: int = CALIBRATION_SAMPLES,
                        seed: int = CALIBRATION_SEED) -> dict[int, list[dict]]:
     """Per window: the (x_t, t) batches the float32 sampler feeds it at the model's own
-    settings, `samples` motions of `frames` frames (and of each window's length, so every
-    window sees inputs)."""
+    settings, `samples` motions of `frames` frames (at least the window) sampled with that
+    window alone (a model samples with its trained window whenever it has it)."""
     recorded: dict[int, list[dict]] = {}
-    originals = dict(model.denoisers)
-    try:
-        for window, denoiser in originals.items():
-            recorded[window] = []
-            model.denoisers[window] = _Recorder(denoiser, recorded[window])
-        for length in sorted({frames, *model.windows}):
-            generate(model, length, SamplingOptions(count=samples, seed=seed, cleanup=False))
-    finally:
-        model.denoisers.update(originals)
+    for window, denoiser in model.denoisers.items():
+        recorded[window] = []
+        alone = dataclasses.replace(model, denoisers={window: _Recorder(denoiser, recorded[window])})
+        generate(alone, max(frames, window), SamplingOptions(count=samples, seed=seed, cleanup=False))
     return recorded
 
 
