@@ -126,39 +126,11 @@ def test_tract_runs_the_mixed_graph_as_onnxruntime_does(mixed):
 
 
 def test_onnxruntime_node_runs_the_mixed_graph(mixed, ort_node, tmp_path):
-    import os
-    import subprocess
-
-    from .test_runtimes import ORT_NODE_SCRIPT, _onnxruntime, _write_cases
+    from .test_runtimes import _onnxruntime, _worst, run_in_ort_node
 
     _, target, _ = mixed
     features = load_model(target).features
     rng = np.random.default_rng(6)
     cases = [(rng.standard_normal((2, features, 64)).astype(np.float32), np.full(2, t, dtype=np.float32))
              for t in (0.0, 10.0, 500.0, 999.0)]  # every item of a call at one step, as the sampler sends them
-    expected = _onnxruntime(target, cases)
-    _write_cases(tmp_path, cases)
-    (tmp_path / "run.js").write_text(ORT_NODE_SCRIPT)
-    env = dict(os.environ, NODE_PATH=str(ort_node / "node_modules"))
-    result = subprocess.run(["node", str(tmp_path / "run.js"), str(target), str(tmp_path)],
-                            capture_output=True, text=True, env=env, timeout=300)
-    assert result.returncode == 0, result.stderr
-    got = np.frombuffer((tmp_path / "x0.bin").read_bytes(), dtype="<f4").reshape((len(cases), *expected[0].shape))
-    assert max(float(np.abs(g - e).max()) for g, e in zip(got, expected)) <= 1e-5
-
-
-@pytest.mark.slow
-def test_every_window_of_a_model_gets_its_mixed_copy(tiny_run, tmp_path, monkeypatch):
-    monkeypatch.setattr(quantize, "JITTER_TOLERANCE", 1.0)  # a 10-step model's noise: the windows are tested here
-    run_cli("sinmdm", "export", str(tiny_run), "--out", str(tmp_path / "tiny.onnx"), "--window", "48",
-            "--window", "96", check=True)
-    windows = [tmp_path / "tiny_w48.onnx", tmp_path / "tiny_w96.onnx"]
-    inputs = quantize.calibration_inputs(load_model(windows), 60, samples=1)
-    assert sorted(inputs) == [48, 96] and all(inputs[w] for w in inputs)
-    assert {batch["x_t"].shape[-1] for batch in inputs[96]} == {96}
-    checked = quantize.quantize_model(windows, DEMO_CLIP, samples=2, threads=2)
-    mixed = load_model([tmp_path / "tiny_w48_int8.onnx", tmp_path / "tiny_w96_int8.onnx"])
-    assert sorted(mixed.denoisers) == [48, 96] and len(checked["outputs"]) == 2
-    x = np.random.default_rng(0).standard_normal((1, mixed.features, 96)).astype(np.float32)
-    float32 = load_model(windows[1]).denoisers[96]
-    np.testing.assert_allclose(mixed.denoisers[96](x, np.zeros(1, np.float32)), float32(x, np.zeros(1, np.float32)), atol=1e-5)
+    assert _worst(run_in_ort_node(ort_node, target, cases, tmp_path), _onnxruntime(target, cases)) <= 1e-5

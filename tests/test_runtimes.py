@@ -182,16 +182,21 @@ def _write_cases(directory: Path, cases) -> None:
     (directory / "t.bin").write_bytes(np.stack([t for _, t in cases]).astype("<f4").tobytes())
 
 
-def test_onnxruntime_node_gives_onnxruntimes_outputs(ort_node, demo_reference, tmp_path):
-    cases, expected = demo_reference
-    _write_cases(tmp_path, cases)
-    (tmp_path / "run.js").write_text(ORT_NODE_SCRIPT)
+def run_in_ort_node(ort_node: Path, model: Path, cases, directory: Path) -> list[np.ndarray]:
+    """x0 of each case, from `model` run by onnxruntime-node (ORT_NODE_SCRIPT) in `directory`."""
+    _write_cases(directory, cases)
+    (directory / "run.js").write_text(ORT_NODE_SCRIPT)
     env = dict(os.environ, NODE_PATH=str(ort_node / "node_modules"))
-    result = subprocess.run(["node", str(tmp_path / "run.js"), str(DEMO_MODEL), str(tmp_path)],
+    result = subprocess.run(["node", str(directory / "run.js"), str(model), str(directory)],
                             capture_output=True, text=True, env=env, timeout=300)
     assert result.returncode == 0, result.stderr
-    got = np.frombuffer((tmp_path / "x0.bin").read_bytes(), dtype="<f4").reshape((len(cases), *expected[0].shape))
-    assert _worst(list(got), expected) <= OUTPUT_TOLERANCE
+    x, _ = cases[0]
+    return list(np.frombuffer((directory / "x0.bin").read_bytes(), dtype="<f4").reshape((len(cases), *x.shape)))
+
+
+def test_onnxruntime_node_gives_onnxruntimes_outputs(ort_node, demo_reference, tmp_path):
+    cases, expected = demo_reference
+    assert _worst(run_in_ort_node(ort_node, DEMO_MODEL, cases, tmp_path), expected) <= OUTPUT_TOLERANCE
 
 
 # ------------------------------------------------------------------ a whole motion: the same joints

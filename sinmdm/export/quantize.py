@@ -31,12 +31,12 @@ from onnx import helper
 
 from ..eval.balance import BALANCE_TOLERANCE, CheckSettings, ClipScorer
 from ..runtime.atomic import OutputSet, file_sha256
-from ..runtime.bvh import BVH, read_bvh
 from ..runtime.errors import SinMDMError
 from ..runtime.generate import generate
 from ..runtime.model import MotionModel, OnnxDenoiser, load_model
-from ..runtime.model_format import INPUT_NAMES, METADATA_KEY, OUTPUT_NAME, decode_metadata, encode_metadata, sidecar_path
+from ..runtime.model_format import INPUT_NAMES, OUTPUT_NAME, sidecar_path
 from ..runtime.options import SamplingOptions
+from .model_files import learned_clip, one_folder, write_with_metadata
 
 INT8_ABOVE_T = 0  # timesteps at or below it run the float32 branch: the last step of any chain
 JITTER_TOLERANCE = 0.10  # relative rise of the jitter ratio that refuses the copy
@@ -175,21 +175,12 @@ def quantize_model(paths: list[str | os.PathLike], clip: str | os.PathLike, samp
     model = load_model(files, threads=threads)
     if "int8_above_t" in (model.metadata.get("precision") or {}):
         raise SinMDMError(f"{files[0]} is already mixed-precision: quantize the float32 model it was made from")
-    reference = read_bvh(clip)
-    expected = model.metadata["provenance"].get("clip_sha256")
-    if expected and file_sha256(clip) != expected:
-        raise SinMDMError(f"{clip} is not the clip this model learned ({model.metadata['provenance'].get('clip')!r}): "
-                          "the check scores against that clip")
-    if source_fps:
-        reference = BVH(reference.skeleton, 1.0 / source_fps, reference.values, reference.path)
-    directory = files[0].parent
-    if any(p.parent.resolve() != directory.resolve() for p in files):
-        raise SinMDMError("quantize the windows of a model in one folder")
-    directory = Path(out) if out is not None else directory
-    targets = {p: directory / mixed_name(p) for p in files}
-    names = [n for t in targets.values() for n in (t.name, sidecar_path(t).name)]
+    reference = learned_clip(model, clip, "the check scores against that clip", source_fps)
+    beside = one_folder(files, "quantize")
+    directory = beside if out is None else Path(out)
+    targets = {p: mixed_name(p) for p in files}
+    names = [n for t in targets.values() for n in (t, sidecar_path(Path(t)).name)]
     scorer = ClipScorer(reference, CheckSettings(samples=samples), fps=model.codec.fps, window=model.trained_window)
-    above_t = INT8_ABOVE_T
 
     with OutputSet(directory, names, force=force) as output:  # refuses existing outputs before the work
         inputs = calibration_inputs(model, scorer.frames)
@@ -197,26 +188,23 @@ def quantize_model(paths: list[str | os.PathLike], clip: str | os.PathLike, samp
         for path in files:
             window = next(w for w, d in model.denoisers.items() if d.path == path)
             int8 = quantized_convolutions(path, inputs[window])
-            graphs[path] = mixed_graph(onnx.load(str(path)), int8, above_t)
+            graphs[path] = mixed_graph(onnx.load(str(path)), int8, INT8_ABOVE_T)
         with tempfile.TemporaryDirectory() as scratch:
             trial = []
             for path, graph in graphs.items():
                 trial.append(Path(scratch) / path.name)
                 onnx.save(graph, str(trial[-1]))
-            mixed = load_model(trial, threads=threads)
-            checked = _check(model, mixed, scorer)
+            checked = _check(model, load_model(trial, threads=threads), scorer)
         for path, graph in graphs.items():
-            entry = next(e for e in graph.metadata_props if e.key == METADATA_KEY)
-            document = decode_metadata(entry.value, str(path))
-            document["precision"] = {"int8_above_t": above_t}
-            document["provenance"] = {**document["provenance"], "quantized": {
-                "source": path.name, "source_sha256": file_sha256(path), **checked}}
-            entry.value = encode_metadata({k: v for k, v in document.items() if k not in ("format", "format_version")})
-            decode_metadata(entry.value, str(path))
-            output.write_bytes(targets[path].name, graph.SerializeToString())
-            output.write_text(sidecar_path(targets[path]).name, entry.value)
+            quantized = {"source": path.name, "source_sha256": file_sha256(path), **checked}
+
+            def change(document: dict, quantized: dict = quantized) -> None:
+                document["precision"] = {"int8_above_t": INT8_ABOVE_T}
+                document["provenance"] = {**document["provenance"], "quantized": quantized}
+
+            write_with_metadata(output, targets[path], graph, path, change)
         output.commit()
-    return {**checked, "outputs": [str(t) for t in targets.values()], "int8_above_t": above_t}
+    return {**checked, "outputs": [str(directory / t) for t in targets.values()], "int8_above_t": INT8_ABOVE_T}
 
 
 def _check(float32: MotionModel, mixed: MotionModel, scorer: ClipScorer) -> dict:
