@@ -155,3 +155,49 @@ def test_cli_cleanup_flag_and_determinism(tmp_path, no_torch_env):
     result = run_cli("sinmdm-run", "inbetween", "--ref", str(DEMO_CLIP), "--steps", "4", "--no-cleanup", "--json",
                      "--out", str(tmp_path / "inb"), env=no_torch_env, check=True)
     assert json.loads(result.stdout)["cleanup"] is False
+
+
+def _turn_angles(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Angles (radians) of the rotations taking a to b, (..., 3, 3) each."""
+    relative = np.swapaxes(a, -1, -2) @ b
+    return np.arccos(np.clip((np.trace(relative, axis1=-2, axis2=-1) - 1) / 2, -1, 1))
+
+
+def test_a_many_jointed_leg_is_pinned_by_small_turns_over_its_whole_chain():
+    """The crab's legs have five rotating joints: one damped-least-squares solve over all of
+    them reaches the pin with turns a fraction of what bending the last two joints takes (the
+    rotations the paper's metrics compare stay near the model's), keeps every bone's length
+    and never twists a bone about itself."""
+    from sinmdm.runtime.cleanup import _solve_chain, find_legs, two_bone_ik, _hinge_axes
+    from sinmdm.runtime.kinematics import chain_kinematics
+
+    bvh = read_bvh(real_clip("Crabnew_Crab-dance-long.bvh"))
+    codec = build_codec(bvh)
+    animation = codec.decode(codec.encode(bvh))
+    parents = animation.skeleton.parents
+    positions = global_positions(animation)
+    legs = find_legs(animation, codec, positions)
+    assert len(legs) == 6 and all(len(leg.chain) == 5 for leg in legs)
+    leg = legs[0]
+    target = positions[:, leg.effector] + np.array([0.03, 0.0, -0.02])  # 3.6 cm on the floor (Y-up)
+    local = animation.rotations.copy()
+    _solve_chain(local, animation.translations, parents, leg, target)
+    _, reached = chain_kinematics(local, animation.translations, parents, [leg.effector])
+    miss = np.linalg.norm(reached[:, 0] - target, axis=-1)
+    chain = positions[:, [*leg.chain, leg.effector]]
+    reach = np.linalg.norm(np.diff(chain, axis=1), axis=-1).sum(axis=1)
+    inside = np.linalg.norm(target - chain[:, 0], axis=-1) < 0.95 * reach  # the crab's legs are near straight
+    assert inside.mean() > 0.5 and miss[inside].max() < 1e-4
+    assert np.all(miss[~inside] <= 0.036 + 1e-6)  # out of reach: as near as the chain goes, never further
+    turned = _turn_angles(animation.rotations[:, list(leg.chain)], local[:, list(leg.chain)])
+    _, before = chain_kinematics(animation.rotations, animation.translations, parents, [*leg.chain, leg.effector])
+    _, after = chain_kinematics(local, animation.translations, parents, [*leg.chain, leg.effector])
+    np.testing.assert_allclose(np.linalg.norm(np.diff(after, axis=1), axis=-1),
+                               np.linalg.norm(np.diff(before, axis=1), axis=-1), atol=1e-6)
+    # the same pin by the last two joints alone (what a human's leg gets)
+    hip, knee = leg.chain[-2], leg.chain[-1]
+    glob, pos = chain_kinematics(animation.rotations, animation.translations, parents, [hip, knee, leg.effector])
+    hinge = _hinge_axes(pos[:, 0], pos[:, 1], pos[:, 2], glob[:, 0])
+    hip_world, knee_world = two_bone_ik(pos[:, 0], pos[:, 1], pos[:, 2], target, hinge)
+    two_bone = np.maximum(_turn_angles(np.eye(3), hip_world), _turn_angles(np.eye(3), hip_world @ knee_world))
+    assert np.median(turned.max(axis=1)) < 0.5 * np.median(two_bone)

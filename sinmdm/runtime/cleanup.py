@@ -23,6 +23,10 @@ with numpy IK so that planted joints stop sliding:
    ankle's translation, a fully planted foot by both steps: that is why this beats
    solving only the highest or only the lowest joint (whichever is not solved for
    keeps sliding while the other is planted).
+3. Many-jointed legs (a crab's five joints from body to tip): one damped-least-squares
+   solve over the whole chain, the smallest turns that reach the target, shared by
+   every joint. Bending only the last two joints turned them 4x as far from the
+   sampled pose, and the paper's metrics read those rotations (BENCHMARKS.md).
 
 Only local rotations of joints with three rotation channels change: bone lengths
 are exact, joints outside the solved legs do not move, and a motion without
@@ -48,6 +52,14 @@ ROOT_CORRECTION = True  # slow the root to its planted feet before the IK (plain
 ROOT_SMOOTHING = 9  # frames of the correction's smoothing window (0.3 s at 30 fps)
 GROW_PASSES = 2  # extra passes that pin the frames a pass slowed down (see cleanup_contacts)
 MAX_SLIDE = 0.25  # a "contact" over which the joint travels further (share of the character's size) is a label error
+# A leg with this many rotating joints above its effector (an arthropod's, not a human's hip-knee
+# or hip-joint-hip-knee) is solved as one chain by damped least squares: the smallest rotations
+# that reach the target, shared by every joint, instead of two joints bent far from the model's pose.
+CHAIN_JOINTS = 4
+CHAIN_ITERATIONS = 6
+CHAIN_DAMPING = 0.02  # share of the chain's reach: keeps a straight chain's solve finite
+CHAIN_REACH = 0.98  # share of the chain's reach a target is pulled back to
+CHAIN_STEP = 0.3  # radians: the largest turn of one joint in one iteration (the linearisation's range)
 _EPS = 1e-9
 
 
@@ -162,7 +174,8 @@ class Leg:
     knee: int
     contacts: tuple[int, ...]  # positions in codec.contact_joints of this leg's contact joints, top first
     pivots: tuple[int | None, ...]  # per contact joint below the effector: the joint aiming it (None: not aimed)
-    keep_orientation: bool = True  # the effector can rotate (three rotation channels)
+    keep_orientation: bool = True  # the effector can rotate (three rotation channels) and has joints below it
+    chain: tuple[int, ...] = ()  # a many-jointed leg: every rotating joint above the effector, top first
 
 
 def _descendants(parents: np.ndarray, joint: int) -> set[int]:
@@ -217,13 +230,24 @@ def find_legs(animation: Animation, codec, positions: np.ndarray) -> list[Leg]:
                 effector, knee, hip = knee, hip, higher
         if knee is None:
             continue
+        chain = [knee]
+        while (higher := _pivot(animation, positions, chain[-1], movable)) is not None:
+            chain.append(higher)
+        # A tip with no joint below it has no orientation to keep: turning it would only move
+        # the model's rotation away from what it sampled.
+        keep = len(skeleton.rotation_order(effector)) == 3
+        if len(chain) >= CHAIN_JOINTS:
+            legs.append(Leg(effector, chain[1], chain[0], tuple(sorted(
+                members, key=lambda k: len(ancestors(skeleton, contacts[k])))), (None,) * (len(members) - 1),
+                keep, tuple(reversed(chain))))
+            continue
         below = _descendants(parents, effector)
         ordered = tuple(sorted(members, key=lambda k: len(ancestors(skeleton, contacts[k]))))
         pivots = tuple(
             p if (p := _pivot(animation, positions, contacts[k], movable)) is not None and p in below else None
             for k in ordered if contacts[k] != effector
         )
-        legs.append(Leg(effector, hip, knee, ordered, pivots, len(skeleton.rotation_order(effector)) == 3))
+        legs.append(Leg(effector, hip, knee, ordered, pivots, keep))
         # Many-jointed legs (a crab's) are short in their last two bones: a second solve one
         # joint higher reaches what the first could not (a human's hip is the root: no pass).
         higher = None if hip is None else _pivot(animation, positions, hip, movable)
@@ -302,7 +326,7 @@ class _Targets:
 
 def _leg_joints(leg: Leg) -> list[int]:
     """The joints whose local rotations solving `leg` may change."""
-    return list(dict.fromkeys(j for j in (leg.hip, leg.knee, leg.effector, *leg.pivots) if j is not None))
+    return list(dict.fromkeys(j for j in (*leg.chain, leg.hip, leg.knee, leg.effector, *leg.pivots) if j is not None))
 
 
 def _solve_leg(local: np.ndarray, translations: np.ndarray, parents: np.ndarray, leg: Leg, contacts: list[int],
@@ -326,6 +350,10 @@ def _solve_leg(local: np.ndarray, translations: np.ndarray, parents: np.ndarray,
     e, k, h = leg.effector, leg.knee, leg.hip
     changed = _leg_joints(leg)
     before = local[:, changed]  # a copy (fancy index): restored on the frames without an offset
+    if leg.chain:
+        _solve_chain(local, translations, parents, leg, targets.positions[:, e] + shift)
+        local[np.flatnonzero(~active)[:, None], changed] = before[~active]
+        return
     chain = [j for j in (h, k, e) if j is not None]
     glob, pos = chain_kinematics(local, translations, parents, chain + [parents[j] for j in chain])
     at = {j: i for i, j in enumerate(chain)}
@@ -353,6 +381,49 @@ def _solve_leg(local: np.ndarray, translations: np.ndarray, parents: np.ndarray,
         local[:, pivot] = _apply_world(local[:, pivot], glob[:, 2], aim)
     still = np.flatnonzero(~active)
     local[still[:, None], changed] = before[still]
+
+
+def _skew(v: np.ndarray) -> np.ndarray:
+    """(..., 3, 3) matrices [v]x with [v]x w = v x w."""
+    x, y, z = np.moveaxis(v, -1, 0)
+    zero = np.zeros_like(x)
+    return np.stack([zero, -z, y, z, zero, -x, -y, x, zero], axis=-1).reshape(v.shape + (3,))
+
+
+def _solve_chain(local: np.ndarray, translations: np.ndarray, parents: np.ndarray, leg: Leg,
+                 target: np.ndarray) -> None:
+    """Damped least squares over every joint of `leg.chain`, in place: per frame the
+    smallest world rotations (by their summed squared angles) that bring the effector to
+    `target` (T, 3), linearised and repeated CHAIN_ITERATIONS times. A rotation about a
+    bone's own direction moves nothing, so none is added: no twist."""
+    chain, e = list(leg.chain), leg.effector
+    n = len(chain)
+    joints = chain + [e] + [parents[j] for j in chain + [e]]
+    glob, pos = chain_kinematics(local, translations, parents, joints)
+    kept = glob[:, n]  # the effector's world orientation before the solve
+    reach = np.linalg.norm(np.diff(pos[:, : n + 1], axis=1), axis=-1).sum(axis=1)  # (T,)
+    damping = (CHAIN_DAMPING * reach) ** 2
+    # Beyond the chain's reach the linearised steps swing about without end: aim at the
+    # nearest point it can reach short of straight (where it cannot bend towards anything), or
+    # at the leg's own extension if it is straighter than that: never further from the pin.
+    toward, distance = _unit(target - pos[:, 0])
+    extended = np.maximum(CHAIN_REACH * reach, np.linalg.norm(pos[:, n] - pos[:, 0], axis=-1))
+    target = pos[:, 0] + toward * np.minimum(distance, extended)[:, None]
+    for _ in range(CHAIN_ITERATIONS):
+        lever = pos[:, n : n + 1] - pos[:, :n]  # (T, n, 3): each joint to the effector
+        jacobian = np.concatenate(list(-_skew(lever[:, i]) for i in range(n)), axis=-1)  # (T, 3, 3n)
+        error = target - pos[:, n]
+        normal = jacobian @ np.swapaxes(jacobian, -1, -2) + damping[:, None, None] * np.eye(3)
+        turn = np.einsum("tai,ta->ti", jacobian, np.linalg.solve(normal, error[..., None])[..., 0]).reshape(-1, n, 3)
+        axis, angle = _unit(turn)
+        angle = np.minimum(angle, CHAIN_STEP)
+        # Deepest first, each against its parent's rotation of this pass: the turns compose
+        # into the linearised sum of the joints' rotations about their own positions.
+        for i in reversed(range(n)):
+            local[:, chain[i]] = _apply_world(local[:, chain[i]], glob[:, n + 1 + i], axis_angle_matrix(axis[:, i], angle[:, i]))
+        glob, pos = chain_kinematics(local, translations, parents, joints)
+    if leg.keep_orientation:
+        local[:, e] = np.swapaxes(glob[:, 2 * n + 1], -1, -2) @ kept
 
 
 def cleaned_legs(codec, features: np.ndarray, start: np.ndarray | None = None,
