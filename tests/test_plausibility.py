@@ -82,3 +82,18 @@ def test_mixamo24_follows_the_papers_unit_rule(walk, tmp_path):
     protocol = protocol_for(walk, "mixamo24")
     cm_labels, m_labels = eval_features(walk, protocol)[:, -4:], eval_features(metres, protocol)[:, -4:]
     assert np.array_equal(cm_labels, m_labels)
+
+
+def test_a_recombination_of_the_clips_own_halves_is_not_called_backwards():
+    """The crab's dance walks one way for its first 100 frames, back and forth for the next 170
+    and stands for the rest: its middle played twice walks backwards far more often than the
+    whole clip does, and is still the clip's own motion. The verdict compares with the most
+    any half of the clip has; a clip that only walks forwards (the walk above) allows nothing."""
+    crab = read_bvh(real_clip("Crabnew_Crab-dance-long.bvh"))
+    middle = crab.values[90:280]
+    twice = np.concatenate([middle, middle])
+    twice[len(middle) :, :3] += middle[-1, :3] - middle[0, :3]  # the second pass starts where the first ends
+    row = plausibility(crab, [BVH(crab.skeleton, crab.frame_time, twice)])["samples"][0]
+    assert row["backward_share"] > row["clip_backward_share"] + 0.05
+    assert row["clip_backward_half_max"] > row["backward_share"] - 0.05
+    assert "backwards" not in row["verdict"]

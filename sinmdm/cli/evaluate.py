@@ -83,6 +83,8 @@ def _print_plausibility(console: Console, plausible: dict | None, samples: list[
     table.add_column("clip", justify="right", style="dim")
     for key, label, clip_key in PLAUSIBILITY:
         clip = f"{aggregate[clip_key]:.2f}" if clip_key else ("1.00" if key.endswith("_ratio") else "0.00")
+        if key == "backward_share":
+            clip += f" (halves up to {aggregate['clip_backward_half_max']:.2f})"
         table.add_row(label, f"{aggregate[key]:.2f}", clip)
     console.print(table)
     for path, row in zip(samples, plausible["samples"]):
