@@ -3,6 +3,8 @@ commands that need it (train, info, export)."""
 
 from __future__ import annotations
 
+import math
+
 from pathlib import Path
 from typing import Optional
 
@@ -53,6 +55,7 @@ def train(
                                            "band, before training stops early (default 3; --steps trains to the end)."),
     norm: Optional[str] = typer.Option(None, "--norm", help="group (the paper's GroupNorm over the window) or frame (per-frame, a strictly local model; see BENCHMARKS.md)."),
     velocity_unit: Optional[str] = typer.Option(None, "--velocity-unit", help="frame (the paper: root velocity in metres per frame) or second (metres per second: the root channels at the rotations' size; see BENCHMARKS.md)."),
+    foot_loss: Optional[float] = typer.Option(None, "--foot-loss", help="Weight of a foot-contact loss (the clip's planted joints kept still in the prediction, by forward kinematics; 0 = the paper's loss alone; see BENCHMARKS.md)."),
 ) -> None:
     """Train a denoiser on one clip."""
     _require_torch()
@@ -70,11 +73,13 @@ def train(
         raise SinMDMError(f"--norm must be {' or '.join(NORM_KINDS)}, got '{norm}'")
     if velocity_unit is not None and velocity_unit not in VELOCITY_UNITS:
         raise SinMDMError(f"--velocity-unit must be {' or '.join(VELOCITY_UNITS)}, got '{velocity_unit}'")
+    if foot_loss is not None and not (foot_loss >= 0 and math.isfinite(foot_loss)):
+        raise SinMDMError(f"--foot-loss must be 0 or a positive number, got {foot_loss}")
     if check_every is not None and check_every < 0:
         raise SinMDMError(f"--check-every must be 0 (never) or more, got {check_every}")
     config = get_preset(preset).with_overrides(
         steps=steps, width=width, crop=crop, batch=batch, checkpoint_every=checkpoint_every, fps=fps, norm=norm,
-        velocity_unit=velocity_unit,
+        velocity_unit=velocity_unit, foot_loss=foot_loss,
         early_stop=False if steps else None, patience=patience,  # --steps forces a fixed budget: the watch still keeps the best
     )
     if check_every is not None:

@@ -51,14 +51,18 @@ class GaussianDiffusion:
                 + _per_example(self.sqrt_one_minus_alphas_cumprod, t, x0) * noise)
 
     def training_loss(self, model: nn.Module, x0: Tensor, t: Tensor | None = None,
-                      noise: Tensor | None = None, generator: torch.Generator | None = None) -> Tensor:
-        """Mean squared error of the x0 prediction over all elements (scalar)."""
+                      noise: Tensor | None = None, generator: torch.Generator | None = None,
+                      extra: Callable[[Tensor, Tensor], Tensor] | None = None) -> Tensor:
+        """Mean squared error of the x0 prediction over all elements (scalar), plus
+        `extra(prediction, x0)` when given (a geometric term, e.g. train.foot_loss)."""
         if t is None:
             t = self.sample_timesteps(x0.shape[0], generator=generator, device=x0.device)
         if noise is None:
             noise = torch.randn(x0.shape, generator=generator, dtype=x0.dtype, device=x0.device)
         prediction = model(self.q_sample(x0, t, noise), t).to(x0.dtype)
         if self.loss_weighting is None:
-            return F.mse_loss(prediction, x0)
-        per_example = ((prediction - x0) ** 2).flatten(1).mean(dim=1)
-        return (self.loss_weighting(t).to(per_example) * per_example).mean()
+            loss = F.mse_loss(prediction, x0)
+        else:
+            per_example = ((prediction - x0) ** 2).flatten(1).mean(dim=1)
+            loss = (self.loss_weighting(t).to(per_example) * per_example).mean()
+        return loss if extra is None else loss + extra(prediction, x0)

@@ -24,6 +24,7 @@ from .checkpoint import (BEST, CHECKSUMS, CONFIG, LOG, RUN_FORMAT, STAGE_PREFIX,
                          load_state, log_records, nonfinite_tensor, save_run)
 from .data import BatchSampler
 from .diffusion import GaussianDiffusion
+from .foot_loss import FootContactLoss
 from .model import Denoiser, ModelConfig, count_parameters, receptive_field
 from .presets import TrainConfig
 from .watch import COPYING, PEAKED, QualityWatch, WatchState, sampling_defaults
@@ -116,6 +117,8 @@ class Run:
         clip_tensor = torch.from_numpy(np.ascontiguousarray(
             clip.features.T if scale is None else clip.features.T * scale[:, None], dtype=np.float32))
         self.sampler = BatchSampler(clip_tensor, config, self.generator)
+        foot = FootContactLoss(clip.codec, scale) if config.foot_loss > 0 else None
+        self.extra_loss = None if foot is None else (lambda prediction, x0: config.foot_loss * foot(prediction, x0))
         self.step = 0
         self.watch = WatchState()
         self.stopped: str | None = None  # why the watch ended the run early
@@ -214,7 +217,7 @@ class Run:
         noise = torch.randn(batch.shape, generator=self.generator).to(self.device)
         self.model.train()
         with torch.autocast(device_type=self.device.type, dtype=torch.bfloat16, enabled=self.autocast):
-            loss = self.diffusion.training_loss(self.model, batch, t=t, noise=noise)
+            loss = self.diffusion.training_loss(self.model, batch, t=t, noise=noise, extra=self.extra_loss)
         self.optimizer.zero_grad(set_to_none=True)
         loss.backward()
         self.optimizer.step()
