@@ -70,11 +70,16 @@ def _unit(v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return np.where(norm > _EPS, v / np.maximum(norm, _EPS), 0.0), norm[..., 0]
 
 
+def _skew(v: np.ndarray) -> np.ndarray:
+    """(..., 3, 3) matrices [v]x with [v]x w = v x w."""
+    x, y, z = np.moveaxis(v, -1, 0)
+    zero = np.zeros_like(x)
+    return np.stack([zero, -z, y, z, zero, -x, -y, x, zero], axis=-1).reshape(v.shape + (3,))
+
+
 def axis_angle_matrix(axis: np.ndarray, angle: np.ndarray) -> np.ndarray:
     """(..., 3, 3) Rodrigues rotations about unit axes (..., 3); a zero axis gives identity."""
-    x, y, z = np.moveaxis(axis, -1, 0)
-    zero = np.zeros_like(x)
-    k = np.stack([zero, -z, y, z, zero, -x, -y, x, zero], axis=-1).reshape(axis.shape[:-1] + (3, 3))
+    k = _skew(axis)
     s, c = np.sin(angle)[..., None, None], np.cos(angle)[..., None, None]
     return np.eye(3) + s * k + (1.0 - c) * (k @ k)
 
@@ -381,13 +386,6 @@ def _solve_leg(local: np.ndarray, translations: np.ndarray, parents: np.ndarray,
         local[:, pivot] = _apply_world(local[:, pivot], glob[:, 2], aim)
     still = np.flatnonzero(~active)
     local[still[:, None], changed] = before[still]
-
-
-def _skew(v: np.ndarray) -> np.ndarray:
-    """(..., 3, 3) matrices [v]x with [v]x w = v x w."""
-    x, y, z = np.moveaxis(v, -1, 0)
-    zero = np.zeros_like(x)
-    return np.stack([zero, -z, y, z, zero, -x, -y, x, zero], axis=-1).reshape(v.shape + (3,))
 
 
 def _solve_chain(local: np.ndarray, translations: np.ndarray, parents: np.ndarray, leg: Leg,
