@@ -52,6 +52,8 @@ def main() -> None:
     parser.add_argument("--set", dest="overrides", action="append", default=[])
     parser.add_argument("--samples", type=int, default=20)
     parser.add_argument("--steps", type=int, default=50, help="sampling steps")
+    parser.add_argument("--faithful", action="store_true",
+                        help="also score the paper's sampler (no margin, no cleanup): foot skating before cleanup")
     parser.add_argument("--work", type=Path, default=ROOT / "runs" / "recipe")
     parser.add_argument("--results", type=Path, default=ROOT / "bench" / "results" / "recipe.json")
     args = parser.parse_args()
@@ -72,7 +74,11 @@ def main() -> None:
     model = export_trained_window(run_dir, run_config["window"])
     row = sample_and_score(model, clip, run_dir / f"samples_{args.steps}", args.steps, args.samples,
                            eval_protocol(args.clip))
-    print(json.dumps(row))
+    rows = [row]
+    if args.faithful:
+        rows.append(sample_and_score(model, clip, run_dir / f"samples_{args.steps}_faithful", args.steps,
+                                     args.samples, eval_protocol(args.clip), margin=0, cleanup=False))
+    print(json.dumps(rows))
     # read again: other ablations may have finished (and appended) while this one trained
     results = json.loads(args.results.read_text()) if args.results.exists() else []
     results.append({
@@ -80,7 +86,7 @@ def main() -> None:
         "train_steps": run_config["step"], "train_seconds": run_config["elapsed_seconds"],
         "train_wall_seconds": round(train_wall, 1), "window": run_config["window"],
         "threads": int(os.environ.get("OMP_NUM_THREADS", "0")),
-        "rows": [row], "date": time.strftime("%Y-%m-%d"),
+        "rows": rows, "date": time.strftime("%Y-%m-%d"),
     })
     args.results.parent.mkdir(parents=True, exist_ok=True)
     args.results.write_text(json.dumps(results, indent=2) + "\n")

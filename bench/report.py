@@ -143,10 +143,10 @@ def fast_sampling_table() -> str:
     return "\n".join(lines) + "\n"
 
 
-def layouts_table() -> str:
+def layouts_table(name: str = "layouts") -> str:
     """Every shared clip and derived layout, short-trained: the paper's metrics beside
     the plausibility aggregate, per sampler variant (and seed set)."""
-    entries = results("layouts")
+    entries = results(name)
     if entries is None:
         return "(no layouts results yet)\n"
     lines = header("case", "sampler", "coverage %", "global div", "local div", "largest root step (x clip)",
@@ -159,11 +159,18 @@ def layouts_table() -> str:
                 continue
             lines.append(
                 f"| {entry['tag']} | {key} | {fmt(v['coverage'], 1)} | {fmt(v['global_diversity'])} | {fmt(v['local_diversity'])} "
-                f"| {fmt(a['root_step_max_ratio'])} | {fmt(100 * a['backward_share'], 0)} ({fmt(100 * a['clip_backward_share'], 0)}) "
+                f"| {fmt(a['root_step_max_ratio'])} | {fmt(100 * a['backward_share'], 0)} ({_clip_backward(a)}) "
                 f"| {fmt(a['foot_skating_cm_s'], 1)} ({fmt(a['clip_foot_skating_cm_s'], 1)}) "
                 f"| {fmt(a['penetration_cm'], 1)} ({fmt(100 * a['penetration_share'], 0)}) | {fmt(a['jitter_ratio'], 1)} "
                 f"| {entry['samples'] - a['implausible']}/{entry['samples']} |")
     return "\n".join(lines) + "\n"
+
+
+def _clip_backward(aggregate: dict) -> str:
+    """The clip's backward share, and the most any half of it has where that was measured."""
+    share = fmt(100 * aggregate["clip_backward_share"], 0)
+    half = aggregate.get("clip_backward_half_max")
+    return share if half is None else f"{share}, halves <= {fmt(100 * half, 0)}"
 
 
 def watched_table() -> str:
@@ -215,7 +222,8 @@ def watched_curve_table() -> str:
     return "\n".join(lines) + "\n"
 
 
-TABLES = {"WATCHED_TABLE": watched_table, "WATCHED_CURVE_TABLE": watched_curve_table, "LAYOUTS_TABLE": layouts_table, "QUALITY_TABLE": quality_table, "SPEED_TABLE": speed_table, "TRAIN_SPEED_TABLE": train_speed_table,
+TABLES = {"WATCHED_TABLE": watched_table, "WATCHED_CURVE_TABLE": watched_curve_table, "LAYOUTS_TABLE": layouts_table,
+          "LAYOUTS_1205_TABLE": lambda: layouts_table("layouts_2026-12-05"), "QUALITY_TABLE": quality_table, "SPEED_TABLE": speed_table, "TRAIN_SPEED_TABLE": train_speed_table,
           "STEPS_TABLE": steps_table, "RECIPE_TABLE": recipe_table, "FAST_SAMPLING_TABLE": fast_sampling_table}
 
 
