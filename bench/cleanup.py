@@ -53,6 +53,8 @@ def measure(model, clip: Path, frames: int, count: int, seed: int, cleanup: bool
     return {**{k: scores[k] for k in KEYS}, **contact_split(clip, result.clips, protocol),
             "foot_skating_cm_s": aggregate["foot_skating_cm_s"],
             "clip_foot_skating_cm_s": aggregate["clip_foot_skating_cm_s"],
+            "foot_bob_cm_s": aggregate["foot_bob_cm_s"], "clip_foot_bob_cm_s": aggregate["clip_foot_bob_cm_s"],
+            "penetration_cm": aggregate["penetration_cm"], "penetration_share": aggregate["penetration_share"],
             "per_sample_skating_cm_s": [r["foot_skating_cm_s"] for r in scores["plausibility"]["samples"]],
             "implausible": aggregate["implausible"]}, result.clips
 
@@ -114,7 +116,8 @@ def main() -> None:
                 else:
                     first_off = clips[0]
             print(f"seed {seed} cleanup {'on ' if cleanup else 'off'}: skating {scores['foot_skating_cm_s']:.2f} cm/s "
-                  f"(clip {scores['clip_foot_skating_cm_s']:.2f}), coverage {scores['coverage']:.1f}, "
+                  f"(clip {scores['clip_foot_skating_cm_s']:.2f}), bobbing {scores['foot_bob_cm_s']:.2f} cm/s "
+                  f"(clip {scores['clip_foot_bob_cm_s']:.2f}), coverage {scores['coverage']:.1f}, "
                   f"global {scores['global_diversity']:.3f}, local {scores['local_diversity']:.3f}; contact bits set on "
                   f"{scores['contact_share']} of frames (clip {scores['clip_contact_share']}); rotations only: global "
                   f"{scores['rotations_only']['global_diversity']:.3f}, local {scores['rotations_only']['local_diversity']:.3f}",

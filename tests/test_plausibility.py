@@ -31,6 +31,7 @@ def test_a_clip_against_itself_is_neutral(walk):
     assert row["jitter_ratio"] == pytest.approx(1, abs=1e-9) and row["speed_distance_m_s"] == 0
     assert row["backward_share"] == row["clip_backward_share"] and row["verdict"] == "plausible"
     assert row["foot_skating_cm_s"] == row["clip_foot_skating_cm_s"]
+    assert row["foot_bob_cm_s"] == row["clip_foot_bob_cm_s"]
 
 
 def test_a_teleport_is_named_with_its_frame(walk):

@@ -68,6 +68,7 @@ PLAUSIBILITY = (
     ("speed_distance_m_s", "root speed distance (m/s)", None),
     ("backward_share", "frames walking backwards", "clip_backward_share"),
     ("foot_skating_cm_s", "foot skating (cm/s)", "clip_foot_skating_cm_s"),
+    ("foot_bob_cm_s", "planted feet bobbing (cm/s)", "clip_foot_bob_cm_s"),
     ("penetration_cm", "floor penetration (cm)", None),
     ("jitter_ratio", "jerk / clip's", None),
 )

@@ -1,7 +1,9 @@
 """Plausibility: what an animator sees and the paper's metrics cannot (they read
 rotations and contact bits, not root motion). Per sample, against the clip, at
 30 fps in metres: root steps (teleports), speed distribution, walking against the
-facing direction, foot skating, floor penetration and jitter, and a one-line verdict.
+facing direction, foot skating and bobbing (horizontal and vertical speed of planted
+feet), floor penetration and jitter, and a one-line verdict (bobbing is reported, not
+judged: the cleanup holds ankles, not toes, at their height).
 
 Joints are the REFERENCE codec's (trajectory joint, contacts, up axis), found by
 name in each sample, so other systems' outputs are scored the same way.
@@ -106,14 +108,20 @@ def most_backward_half(t: Track, forward: np.ndarray | None, up: int) -> float:
     return float(sums.max() / length)
 
 
-def skating_cm_s(t: Track, contacts: list[int], speed: float, up: int, floor: float, size: float) -> float:
+def planted_speeds_cm_s(t: Track, contacts: list[int], speed: float, up: int, floor: float,
+                        size: float) -> tuple[float, float]:
+    """Mean horizontal (skating) and vertical (bobbing) speed of the contact joints on the
+    frames where they are planted: slow by the contact rule and near the clip's floor."""
     if not contacts:
-        return 0.0
+        return 0.0, 0.0
     feet = t.positions[:, contacts]
     planted = contact_labels(feet, FPS, speed).astype(bool) & (feet[..., up] - floor < 0.05 * size)
-    horizontal = np.linalg.norm(np.diff(feet[..., _horizontal(up)], axis=0), axis=-1) * FPS
+    velocity = np.diff(feet, axis=0) * FPS
     planted = planted[1:] & planted[:-1]
-    return float(horizontal[planted].mean() * 100) if planted.any() else 0.0
+    if not planted.any():
+        return 0.0, 0.0
+    horizontal = np.linalg.norm(velocity[..., _horizontal(up)], axis=-1)
+    return float(horizontal[planted].mean() * 100), float(np.abs(velocity[..., up])[planted].mean() * 100)
 
 
 def jerk(t: Track) -> float:
@@ -138,8 +146,8 @@ def score_sample(ref: Track, sample: Track, codec: MotionCodec, contacts: list[i
     up, size = codec.up_axis, codec.size
     ref_steps, steps = root_steps(ref), root_steps(sample)
     floor_step = STEP_FLOOR * size
-    ref_skate = skating_cm_s(ref, contacts, codec.contact_speed, up, floor, size)
-    skate = skating_cm_s(sample, contacts, codec.contact_speed, up, floor, size)
+    ref_skate, ref_bob = planted_speeds_cm_s(ref, contacts, codec.contact_speed, up, floor, size)
+    skate, bob = planted_speeds_cm_s(sample, contacts, codec.contact_speed, up, floor, size)
     depth = floor - sample.positions[..., up]
     below = depth > FLOOR_TOLERANCE
     scores = {
@@ -154,6 +162,8 @@ def score_sample(ref: Track, sample: Track, codec: MotionCodec, contacts: list[i
         "clip_backward_half_max": most_backward_half(ref, forward, up),
         "foot_skating_cm_s": skate,
         "clip_foot_skating_cm_s": ref_skate,
+        "foot_bob_cm_s": bob,
+        "clip_foot_bob_cm_s": ref_bob,
         "penetration_cm": float(depth[below].mean() * 100) if below.any() else 0.0,
         "penetration_share": float(below.any(axis=1).mean()),
         "jitter_ratio": _ratio(jerk(sample), jerk(ref)),
@@ -199,10 +209,11 @@ def plausibility(reference: BVH, samples: list[BVH], units: str | float = "auto"
         "root_step_max_ratio": max(r["root_step_max_ratio"] for r in rows),
         **{k: float(np.mean([r[k] for r in rows])) for k in (
             "root_step_p99_ratio", "speed_distance_m_s", "backward_share", "foot_skating_cm_s",
-            "penetration_cm", "penetration_share", "jitter_ratio")},
+            "foot_bob_cm_s", "penetration_cm", "penetration_share", "jitter_ratio")},
         "clip_backward_share": rows[0]["clip_backward_share"],
         "clip_backward_half_max": rows[0]["clip_backward_half_max"],
         "clip_foot_skating_cm_s": rows[0]["clip_foot_skating_cm_s"],
+        "clip_foot_bob_cm_s": rows[0]["clip_foot_bob_cm_s"],
         "implausible": sum(r["verdict"] != "plausible" for r in rows),
     } if rows else None
     return {"samples": rows, "aggregate": aggregate,

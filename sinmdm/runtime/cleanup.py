@@ -7,9 +7,9 @@ with numpy IK so that planted joints stop sliding:
 1. Intervals: runs of frames with label > 0.5 (unless the joint travels further than
    `MAX_SLIDE` over the run: a label on a swinging limb) or where the joint moves
    slower than the codec's contact speed, at least `MIN_CONTACT_FRAMES` long.
-   Inside a run the joint's target is its horizontal position averaged over the
-   run; its height is kept (only sliding is removed, the foot is never pushed into
-   the floor). The IK offset (target - position) fades out over `BLEND_FRAMES`
+   Inside a run the joint's target is its position averaged over the run, height
+   included: a planted foot neither slides nor bobs (sampled feet rise and fall by
+   about 10 cm/s while planted, 15x the crab clip's own: BENCHMARKS.md). The IK offset (target - position) fades out over `BLEND_FRAMES`
    after a run and in over `BLEND_FRAMES` before the next one (cosine ramps,
    normalised where two ramps overlap), so nothing pops.
 2. Legs: contact joints on one chain (Mixamo's Foot, ToeBase, Toe_End) form one
@@ -137,12 +137,10 @@ def _fade(distance: np.ndarray, blend: int) -> np.ndarray:
     return 0.5 * (1.0 + np.cos(np.pi * x))
 
 
-def contact_offsets(positions: np.ndarray, inside: np.ndarray, up_axis: int = 1,
-                    blend: int = BLEND_FRAMES) -> tuple[np.ndarray, np.ndarray]:
-    """Horizontal IK offsets of one joint: `anchor` (T, 3) and `weight` (T,) with the
-    applied offset = weight * anchor. Inside an interval the anchor takes the joint to
-    the interval's mean horizontal position (weight 1); around it the boundary offsets
-    fade out and in."""
+def contact_offsets(positions: np.ndarray, inside: np.ndarray, blend: int = BLEND_FRAMES) -> tuple[np.ndarray, np.ndarray]:
+    """IK offsets of one joint: `anchor` (T, 3) and `weight` (T,) with the applied
+    offset = weight * anchor. Inside an interval the anchor takes the joint to the
+    interval's mean position (weight 1); around it the boundary offsets fade out and in."""
     frames = len(positions)
     index = np.arange(frames)
     runs = np.cumsum(np.diff(np.concatenate([[False], inside]).astype(np.int8)) == 1) * inside  # 1.. per run, 0 outside
@@ -150,7 +148,6 @@ def contact_offsets(positions: np.ndarray, inside: np.ndarray, up_axis: int = 1,
     means = np.stack([np.bincount(runs, positions[:, k], minlength=len(counts)) for k in range(3)], axis=1)
     means /= np.maximum(counts, 1.0)[:, None]
     offset = np.where(inside[:, None], means[runs] - positions, 0.0)
-    offset[:, up_axis] = 0.0
     previous = np.maximum.accumulate(np.where(inside, index, -1))
     following = np.minimum.accumulate(np.where(inside, index, frames)[::-1])[::-1]
     w_prev = np.where(previous >= 0, _fade(index - previous, blend), 0.0)
@@ -161,13 +158,12 @@ def contact_offsets(positions: np.ndarray, inside: np.ndarray, up_axis: int = 1,
     return anchor, np.minimum(total, 1.0)
 
 
-def _cyclic_offsets(positions: np.ndarray, inside: np.ndarray, shift: np.ndarray, up_axis: int,
-                    blend: int) -> tuple[np.ndarray, np.ndarray]:
+def _cyclic_offsets(positions: np.ndarray, inside: np.ndarray, shift: np.ndarray, blend: int) -> tuple[np.ndarray, np.ndarray]:
     """contact_offsets on a loop: the cycle tiled three times (moved by `shift` per cycle)
     so that intervals and fades wrap across the seam; the middle copy is returned."""
     frames = len(positions)
     tiled = np.concatenate([positions - shift, positions, positions + shift])
-    anchor, weight = contact_offsets(tiled, np.tile(inside, 3), up_axis, blend)
+    anchor, weight = contact_offsets(tiled, np.tile(inside, 3), blend)
     return anchor[frames : 2 * frames], weight[frames : 2 * frames]
 
 
@@ -305,16 +301,18 @@ def two_bone_ik(a: np.ndarray, b: np.ndarray, c: np.ndarray, target: np.ndarray,
 def _on_sphere(center: np.ndarray, current: np.ndarray, anchor: np.ndarray, up: int) -> np.ndarray:
     """The point at current's distance from `center` whose horizontal position is the
     anchor's (or as near as that distance allows), on current's side of center's height
-    and never lower than current: where a bone from `center` must point for its end to
-    stand over the anchor without being pushed into the floor (a toe swung towards its
-    pin would otherwise dip by up to 5 cm)."""
+    and never lower than the anchor: where a bone from `center` must point for its end to
+    stand over its pin without being pushed into the floor (a toe swung towards its pin
+    would otherwise dip by up to 5 cm) and without following the sampled toe's own rise
+    and fall while planted."""
     radius = np.linalg.norm(current - center, axis=-1)
     flat = anchor - center
     flat[..., up] = 0.0
     direction, distance = _unit(flat)
     distance = np.minimum(distance, radius)
     side = np.where(current[..., up] >= center[..., up], 1.0, -1.0)
-    rise = np.maximum(side * np.sqrt(np.maximum(radius**2 - distance**2, 0.0)), current[..., up] - center[..., up])
+    lowest = np.clip(anchor[..., up] - center[..., up], -radius, radius)
+    rise = np.maximum(side * np.sqrt(np.maximum(radius**2 - distance**2, 0.0)), lowest)
     distance = np.sqrt(np.maximum(radius**2 - rise**2, 0.0))
     point = center + direction * distance[..., None]
     point[..., up] = center[..., up] + rise
@@ -507,9 +505,9 @@ def _pin(animation: Animation, local: np.ndarray, codec, legs: list[Leg], free: 
     for k, joint in enumerate(contacts):
         if inside[:, k].any():
             if shift is None:
-                anchors[:, k], weights[:, k] = contact_offsets(positions[:, joint], inside[:, k], up)
+                anchors[:, k], weights[:, k] = contact_offsets(positions[:, joint], inside[:, k])
             else:
-                anchors[:, k], weights[:, k] = _cyclic_offsets(positions[:, joint], inside[:, k], shift, up, BLEND_FRAMES)
+                anchors[:, k], weights[:, k] = _cyclic_offsets(positions[:, joint], inside[:, k], shift, BLEND_FRAMES)
     targets = _Targets(positions, anchors, weights, up)
     for leg, leg_free in zip(legs, free):
         _solve_leg(local, animation.translations, animation.skeleton.parents, leg, contacts, targets, leg_free)
