@@ -6,7 +6,8 @@ sample 20 motions of twice the clip's length and score them, like bench/quality.
 
 `--set KEY=VALUE` overrides any TrainConfig field (steps, crop, rescale, lr, lr_schedule,
 ema, norm, dropout, width, batch, ...). Finished tags are skipped; an interrupted
-training resumes.
+training resumes. `--run DIR` scores a finished run (the baseline) the same way, without
+training.
 """
 
 from __future__ import annotations
@@ -54,6 +55,8 @@ def main() -> None:
     parser.add_argument("--steps", type=int, default=50, help="sampling steps")
     parser.add_argument("--faithful", action="store_true",
                         help="also score the paper's sampler (no margin, no cleanup): foot skating before cleanup")
+    parser.add_argument("--run", type=Path, default=None,
+                        help="score this finished run (the baseline) instead of training one")
     parser.add_argument("--work", type=Path, default=ROOT / "runs" / "recipe")
     parser.add_argument("--results", type=Path, default=ROOT / "bench" / "results" / "recipe.json")
     args = parser.parse_args()
@@ -65,10 +68,11 @@ def main() -> None:
     if any(r["tag"] == tag for r in results):
         print(f"skip {tag}: already measured")
         return
-    run_dir = args.work / tag
+    run_dir = args.run or args.work / tag
     clip = MOTIONS / args.clip
     began = time.perf_counter()
-    train(clip, run_dir, config, device="cpu", resume=(run_dir / "config.json").exists())
+    if args.run is None:
+        train(clip, run_dir, config, device="cpu", resume=(run_dir / "config.json").exists())
     train_wall = time.perf_counter() - began
     run_config = load_config(run_dir)
     model = export_trained_window(run_dir, run_config["window"])
@@ -84,7 +88,7 @@ def main() -> None:
     results.append({
         "tag": tag, "clip": args.clip, "variant": args.tag, "overrides": args.overrides,
         "train_steps": run_config["step"], "train_seconds": run_config["elapsed_seconds"],
-        "train_wall_seconds": round(train_wall, 1), "window": run_config["window"],
+        "train_wall_seconds": round(train_wall, 1) if args.run is None else None, "window": run_config["window"],
         "threads": int(os.environ.get("OMP_NUM_THREADS", "0")),
         "rows": rows, "date": time.strftime("%Y-%m-%d"),
     })

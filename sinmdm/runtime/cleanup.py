@@ -19,8 +19,11 @@ with numpy IK so that planted joints stop sliding:
    ("hip" and "knee") moves the effector to its target while keeping its world
    orientation, so the joints below it translate rigidly with it; each lower
    contact joint is then aimed at its own target by its nearest rotating ancestor
-   (the ankle for a toe). A leg with only a toe planted (heel off) is pinned by the
-   ankle's translation, a fully planted foot by both steps: that is why this beats
+   (the ankle for a toe), turning at most `PIVOT_TURN`: uncapped, a toe whose pin lies
+   behind it swung round by up to 180 degrees, bent far past anything the clip does
+   (BENCHMARKS.md); what the cap leaves slides a little. A leg with only a toe planted
+   (heel off) is pinned by the ankle's translation, a fully planted foot by both steps:
+   that is why this beats
    solving only the highest or only the lowest joint (whichever is not solved for
    keeps sliding while the other is planted).
 3. Many-jointed legs (a crab's five joints from body to tip): one damped-least-squares
@@ -60,6 +63,7 @@ CHAIN_ITERATIONS = 6
 CHAIN_DAMPING = 0.02  # share of the chain's reach: keeps a straight chain's solve finite
 CHAIN_REACH = 0.98  # share of the chain's reach a target is pulled back to
 CHAIN_STEP = 0.3  # radians: the largest turn of one joint in one iteration (the linearisation's range)
+PIVOT_TURN = 0.5  # radians (29 deg): the largest turn an ankle or a toe makes to aim the contact below it
 _EPS = 1e-9
 
 
@@ -380,7 +384,9 @@ def _solve_leg(local: np.ndarray, translations: np.ndarray, parents: np.ndarray,
         joint = contacts[m]
         glob, pos = chain_kinematics(local, translations, parents, [pivot, joint, parents[pivot]])
         goal = _on_sphere(pos[:, 0], pos[:, 1], targets.positions[:, joint] + anchors[:, m], targets.up)
-        aim = rotation_between(pos[:, 1] - pos[:, 0], goal - pos[:, 0], weights[:, m])
+        axis, _ = _unit(np.cross(pos[:, 1] - pos[:, 0], goal - pos[:, 0]))
+        turn = np.minimum(_angle(pos[:, 1] - pos[:, 0], goal - pos[:, 0]) * weights[:, m], PIVOT_TURN)
+        aim = axis_angle_matrix(axis, turn)
         local[:, pivot] = _apply_world(local[:, pivot], glob[:, 2], aim)
     still = np.flatnonzero(~active)
     local[still[:, None], changed] = before[still]
