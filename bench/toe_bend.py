@@ -56,7 +56,8 @@ def main() -> None:
     print(f"clip range: left {low[0]:.0f}-{high[0]:.0f}, right {low[1]:.0f}-{high[1]:.0f} deg")
     rows, traces = [], []
     for cap in [*args.caps, None]:  # None: the cleanup off
-        cleanup.PIVOT_TURN = cap if cap is not None else cleanup.PIVOT_TURN
+        if cap is not None:
+            cleanup.PIVOT_TURN = cap
         result = generate(model, frames, SamplingOptions(count=args.samples, seed=0, cleanup=cap is not None))
         bends = [toe_bends(animation_from_bvh(c)) for c in result.clips]
         every = np.concatenate(bends)

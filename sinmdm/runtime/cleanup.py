@@ -23,9 +23,8 @@ with numpy IK so that planted joints stop sliding:
    behind it swung round by up to 180 degrees, bent far past anything the clip does
    (BENCHMARKS.md); what the cap leaves slides a little. A leg with only a toe planted
    (heel off) is pinned by the ankle's translation, a fully planted foot by both steps:
-   that is why this beats
-   solving only the highest or only the lowest joint (whichever is not solved for
-   keeps sliding while the other is planted).
+   that is why this beats solving only the highest or only the lowest joint (whichever
+   is not solved for keeps sliding while the other is planted).
 3. Many-jointed legs (a crab's five joints from body to tip): one damped-least-squares
    solve over the whole chain, the smallest turns that reach the target, shared by
    every joint. Bending only the last two joints turned them 4x as far from the
@@ -93,10 +92,12 @@ def _angle(u: np.ndarray, v: np.ndarray) -> np.ndarray:
     return np.arctan2(np.linalg.norm(np.cross(u, v), axis=-1), np.sum(u * v, axis=-1))
 
 
-def rotation_between(u: np.ndarray, v: np.ndarray, fraction: np.ndarray | float = 1.0) -> np.ndarray:
-    """The shortest rotation turning direction u towards v, by `fraction` of the way."""
+def rotation_between(u: np.ndarray, v: np.ndarray, fraction: np.ndarray | float = 1.0,
+                     limit: float = np.inf) -> np.ndarray:
+    """The shortest rotation turning direction u towards v, by `fraction` of the way and
+    at most `limit` radians."""
     axis, _ = _unit(np.cross(u, v))
-    return axis_angle_matrix(axis, _angle(u, v) * fraction)
+    return axis_angle_matrix(axis, np.minimum(_angle(u, v) * fraction, limit))
 
 
 def _apply_world(local: np.ndarray, parent_global: np.ndarray, world: np.ndarray) -> np.ndarray:
@@ -384,9 +385,7 @@ def _solve_leg(local: np.ndarray, translations: np.ndarray, parents: np.ndarray,
         joint = contacts[m]
         glob, pos = chain_kinematics(local, translations, parents, [pivot, joint, parents[pivot]])
         goal = _on_sphere(pos[:, 0], pos[:, 1], targets.positions[:, joint] + anchors[:, m], targets.up)
-        axis, _ = _unit(np.cross(pos[:, 1] - pos[:, 0], goal - pos[:, 0]))
-        turn = np.minimum(_angle(pos[:, 1] - pos[:, 0], goal - pos[:, 0]) * weights[:, m], PIVOT_TURN)
-        aim = axis_angle_matrix(axis, turn)
+        aim = rotation_between(pos[:, 1] - pos[:, 0], goal - pos[:, 0], weights[:, m], PIVOT_TURN)
         local[:, pivot] = _apply_world(local[:, pivot], glob[:, 2], aim)
     still = np.flatnonzero(~active)
     local[still[:, None], changed] = before[still]
