@@ -41,6 +41,27 @@ def test_intervals_and_fades():
     assert np.all(np.diff(weight[5:11]) >= 0) and np.all(np.diff(weight[19:25]) <= 0)  # ramps, no pop
 
 
+def test_a_ball_under_a_planted_ankle_is_pinned_a_foot_away_from_it():
+    """A sliding foot planted heel first: the ankle's run (frames 10-20) and the ball's (15-30)
+    are different spans of the slide, so their own means lie further apart than the foot is
+    long (the ball could not reach its pin and the toe bent down to its own). Carried by the
+    ankle's offset over the frames they share, the ball's pin keeps the foot's length."""
+    frames = np.arange(40)
+    ankle = np.zeros((40, 3))
+    ankle[:, 0] = 0.1 * frames
+    ankle[:, 1] = 0.1
+    ball = ankle + [0.15, -0.08, 0.0]  # a rigid foot sliding along x
+    ankle_in, ball_in = np.zeros(40, dtype=bool), np.zeros(40, dtype=bool)
+    ankle_in[10:20], ball_in[15:30] = True, True
+    ankle_anchor, _ = contact_offsets(ankle, ankle_in)
+    own, _ = contact_offsets(ball, ball_in)
+    carried, weight = contact_offsets(ball, ball_in, carried=np.where(ankle_in[:, None], ankle_anchor, np.nan))
+    ankle_pin, own_pin, ball_pin = ankle[12] + ankle_anchor[12], ball[20] + own[20], ball[20] + carried[20]
+    assert np.linalg.norm(own_pin - ankle_pin) > 0.5  # own means: 1 m apart on a 17 cm foot
+    assert np.allclose(ball_pin - ankle_pin, [0.15, -0.08, 0.0])
+    assert np.allclose(ball[15:30] + carried[15:30], ball_pin) and weight[15:30].min() == 1  # one pin per run
+
+
 def test_cleanup_removes_sliding_on_the_demo_model(demo):
     """On sampled motion the planted feet slide several times the clip's own speed; after the
     cleanup they slide no more than the clip (plus the verdict's slack)."""

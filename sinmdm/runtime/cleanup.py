@@ -9,9 +9,12 @@ with numpy IK so that planted joints stop sliding:
    slower than the codec's contact speed, at least `MIN_CONTACT_FRAMES` long.
    Inside a run the joint's target is its position averaged over the run, height
    included: a planted foot neither slides nor bobs (sampled feet rise and fall by
-   about 10 cm/s while planted, 15x the crab clip's own: BENCHMARKS.md). The IK offset (target - position) fades out over `BLEND_FRAMES`
-   after a run and in over `BLEND_FRAMES` before the next one (cosine ramps,
-   normalised where two ramps overlap), so nothing pops.
+   about 10 cm/s while planted, 15x the crab clip's own: BENCHMARKS.md). A joint planted
+   while the joint above it on the foot is (the ball under a planted ankle) is pinned where
+   the ankle's pin carries it over the frames they share, so the pins stay a foot apart.
+   The IK offset (target - position) fades out over `BLEND_FRAMES` after a run and in
+   over `BLEND_FRAMES` before the next one (cosine ramps, normalised where two ramps
+   overlap), so nothing pops.
 2. Legs: contact joints on one chain (Mixamo's Foot, ToeBase, Toe_End) form one
    leg. Its effector is the highest of them, moved up past short end bones (a toe
    whose bone is shorter than half the bone above it hands over to the ankle).
@@ -142,16 +145,31 @@ def _fade(distance: np.ndarray, blend: int) -> np.ndarray:
     return 0.5 * (1.0 + np.cos(np.pi * x))
 
 
-def contact_offsets(positions: np.ndarray, inside: np.ndarray, blend: int = BLEND_FRAMES) -> tuple[np.ndarray, np.ndarray]:
+def _run_means(runs: np.ndarray, positions: np.ndarray, frames: np.ndarray, count: int) -> tuple[np.ndarray, np.ndarray]:
+    """Per run id (0..count-1): the mean of positions (T, 3) over the run's `frames` (T,) bool, and how many."""
+    ids = runs[frames]
+    counts = np.bincount(ids, minlength=count).astype(float)
+    sums = np.stack([np.bincount(ids, positions[frames, k], minlength=count) for k in range(3)], axis=1)
+    return sums / np.maximum(counts, 1.0)[:, None], counts
+
+
+def contact_offsets(positions: np.ndarray, inside: np.ndarray, blend: int = BLEND_FRAMES,
+                    carried: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """IK offsets of one joint: `anchor` (T, 3) and `weight` (T,) with the applied
     offset = weight * anchor. Inside an interval the anchor takes the joint to the
-    interval's mean position (weight 1); around it the boundary offsets fade out and in."""
+    interval's mean position (weight 1); around it the boundary offsets fade out and in.
+    `carried` (T, 3), NaN where unset: the offset of the planted joint above this one on
+    the same foot (the ankle over the ball). A run that overlaps it is pinned where that
+    offset carries the joint on the shared frames: pinned on their own means over their
+    own runs, a sliding foot's ankle and ball land further apart than the foot is long."""
     frames = len(positions)
     index = np.arange(frames)
     runs = np.cumsum(np.diff(np.concatenate([[False], inside]).astype(np.int8)) == 1) * inside  # 1.. per run, 0 outside
-    counts = np.bincount(runs, minlength=runs.max() + 1).astype(float)
-    means = np.stack([np.bincount(runs, positions[:, k], minlength=len(counts)) for k in range(3)], axis=1)
-    means /= np.maximum(counts, 1.0)[:, None]
+    means, _ = _run_means(runs, positions, np.ones(frames, dtype=bool), runs.max() + 1)
+    if carried is not None:
+        shared = inside & np.isfinite(carried).all(axis=1)
+        moved, counts = _run_means(runs, positions + np.nan_to_num(carried), shared, len(means))
+        means = np.where(counts[:, None] > 0, moved, means)
     offset = np.where(inside[:, None], means[runs] - positions, 0.0)
     previous = np.maximum.accumulate(np.where(inside, index, -1))
     following = np.minimum.accumulate(np.where(inside, index, frames)[::-1])[::-1]
@@ -163,12 +181,13 @@ def contact_offsets(positions: np.ndarray, inside: np.ndarray, blend: int = BLEN
     return anchor, np.minimum(total, 1.0)
 
 
-def _cyclic_offsets(positions: np.ndarray, inside: np.ndarray, shift: np.ndarray, blend: int) -> tuple[np.ndarray, np.ndarray]:
+def _cyclic_offsets(positions: np.ndarray, inside: np.ndarray, shift: np.ndarray, blend: int,
+                    carried: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """contact_offsets on a loop: the cycle tiled three times (moved by `shift` per cycle)
     so that intervals and fades wrap across the seam; the middle copy is returned."""
     frames = len(positions)
     tiled = np.concatenate([positions - shift, positions, positions + shift])
-    anchor, weight = contact_offsets(tiled, np.tile(inside, 3), blend)
+    anchor, weight = contact_offsets(tiled, np.tile(inside, 3), blend, None if carried is None else np.tile(carried, (3, 1)))
     return anchor[frames : 2 * frames], weight[frames : 2 * frames]
 
 
@@ -507,12 +526,18 @@ def _pin(animation: Animation, local: np.ndarray, codec, legs: list[Leg], free: 
     """Every leg solved, in place on `local` (T, J, 3, 3), for the contact frames `inside` (T, C)."""
     up, contacts = codec.up_axis, list(codec.contact_joints)
     anchors, weights = np.zeros((animation.frames, len(contacts), 3)), np.zeros((animation.frames, len(contacts)))
-    for k, joint in enumerate(contacts):
+    # Each lower contact (a ball) below the planted joint that aims it (an ankle): pinned where that joint's pin carries it.
+    above = {m: contacts.index(p) for leg in legs
+             for m, p in zip([m for m in leg.contacts if contacts[m] != leg.effector], leg.pivots) if p in contacts}
+    for k in sorted(range(len(contacts)), key=lambda k: len(ancestors(animation.skeleton, contacts[k]))):  # top first
         if inside[:, k].any():
+            carried = None
+            if k in above:
+                carried = np.where(inside[:, above[k], None], anchors[:, above[k]], np.nan)
             if shift is None:
-                anchors[:, k], weights[:, k] = contact_offsets(positions[:, joint], inside[:, k])
+                anchors[:, k], weights[:, k] = contact_offsets(positions[:, contacts[k]], inside[:, k], carried=carried)
             else:
-                anchors[:, k], weights[:, k] = _cyclic_offsets(positions[:, joint], inside[:, k], shift, BLEND_FRAMES)
+                anchors[:, k], weights[:, k] = _cyclic_offsets(positions[:, contacts[k]], inside[:, k], shift, BLEND_FRAMES, carried)
     targets = _Targets(positions, anchors, weights, up)
     for leg, leg_free in zip(legs, free):
         _solve_leg(local, animation.translations, animation.skeleton.parents, leg, contacts, targets, leg_free)
