@@ -351,6 +351,11 @@ class _Targets:
     up: int
 
 
+def _lower_contacts(leg: Leg, contacts: list[int]) -> list[int]:
+    """The leg's contacts below its effector, top first: the ones `leg.pivots` aim, in order."""
+    return [m for m in leg.contacts if contacts[m] != leg.effector]
+
+
 def _leg_joints(leg: Leg) -> list[int]:
     """The joints whose local rotations solving `leg` may change."""
     return list(dict.fromkeys(j for j in (*leg.chain, leg.hip, leg.knee, leg.effector, *leg.pivots) if j is not None))
@@ -363,7 +368,7 @@ def _solve_leg(local: np.ndarray, translations: np.ndarray, parents: np.ndarray,
     and only on frames where the leg has an offset to reach."""
     anchors, weights = targets.anchors, targets.weights * np.reshape(free, (-1, 1))
     top = leg.contacts[0] if contacts[leg.contacts[0]] == leg.effector else None
-    lower = [k for k in leg.contacts if k != top]
+    lower = _lower_contacts(leg, contacts)
     # The effector moves by its own offset, and otherwise by what its lower contacts ask.
     low_w = weights[:, lower].sum(axis=1) if lower else np.zeros(len(local))
     low_offset = np.einsum("tk,tkd->td", weights[:, lower], anchors[:, lower]) / np.maximum(low_w, 1.0)[:, None] \
@@ -398,7 +403,7 @@ def _solve_leg(local: np.ndarray, translations: np.ndarray, parents: np.ndarray,
         local[:, k] = _apply_world(local[:, k], parent_glob[k], total)
     if leg.keep_orientation:  # keep the effector's world orientation: the joints below translate rigidly
         local[:, e] = _apply_world(local[:, e], parent_glob[e], np.swapaxes(total, -1, -2))
-    for m, pivot in zip([m for m in leg.contacts if m != top], leg.pivots):
+    for m, pivot in zip(lower, leg.pivots):
         if pivot is None:
             continue
         joint = contacts[m]
@@ -527,8 +532,7 @@ def _pin(animation: Animation, local: np.ndarray, codec, legs: list[Leg], free: 
     up, contacts = codec.up_axis, list(codec.contact_joints)
     anchors, weights = np.zeros((animation.frames, len(contacts), 3)), np.zeros((animation.frames, len(contacts)))
     # Each lower contact (a ball) below the planted joint that aims it (an ankle): pinned where that joint's pin carries it.
-    above = {m: contacts.index(p) for leg in legs
-             for m, p in zip([m for m in leg.contacts if contacts[m] != leg.effector], leg.pivots) if p in contacts}
+    above = {m: contacts.index(p) for leg in legs for m, p in zip(_lower_contacts(leg, contacts), leg.pivots) if p in contacts}
     for k in sorted(range(len(contacts)), key=lambda k: len(ancestors(animation.skeleton, contacts[k]))):  # top first
         if inside[:, k].any():
             carried = None
