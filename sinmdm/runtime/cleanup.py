@@ -349,6 +349,7 @@ class _Targets:
     anchors: np.ndarray  # (T, C, 3) horizontal offsets to each contact joint's target
     weights: np.ndarray  # (T, C) how much of the offset applies
     up: int
+    floors: np.ndarray  # (C,) each contact joint's lowest pinned height
 
 
 def _lower_contacts(leg: Leg, contacts: list[int]) -> list[int]:
@@ -408,7 +409,11 @@ def _solve_leg(local: np.ndarray, translations: np.ndarray, parents: np.ndarray,
             continue
         joint = contacts[m]
         glob, pos = chain_kinematics(local, translations, parents, [pivot, joint, parents[pivot]])
-        goal = _on_sphere(pos[:, 0], pos[:, 1], targets.positions[:, joint] + anchors[:, m], targets.up)
+        pin = targets.positions[:, joint] + anchors[:, m]
+        # Before and after a run the pin is the sampled position moved by the run's offset: where the
+        # sample swings through the floor and back, that lies deeper than the sample itself goes.
+        pin[:, targets.up] = np.maximum(pin[:, targets.up], np.minimum(targets.positions[:, joint, targets.up], targets.floors[m]))
+        goal = _on_sphere(pos[:, 0], pos[:, 1], pin, targets.up)
         aim = rotation_between(pos[:, 1] - pos[:, 0], goal - pos[:, 0], weights[:, m], PIVOT_TURN)
         local[:, pivot] = _apply_world(local[:, pivot], glob[:, 2], aim)
     still = np.flatnonzero(~active)
@@ -542,7 +547,9 @@ def _pin(animation: Animation, local: np.ndarray, codec, legs: list[Leg], free: 
                 anchors[:, k], weights[:, k] = contact_offsets(positions[:, contacts[k]], inside[:, k], carried=carried)
             else:
                 anchors[:, k], weights[:, k] = _cyclic_offsets(positions[:, contacts[k]], inside[:, k], shift, BLEND_FRAMES, carried)
-    targets = _Targets(positions, anchors, weights, up)
+    pinned = positions[:, contacts, up] + anchors[..., up]
+    floors = np.where(inside, pinned, np.inf).min(axis=0)
+    targets = _Targets(positions, anchors, weights, up, floors)
     for leg, leg_free in zip(legs, free):
         _solve_leg(local, animation.translations, animation.skeleton.parents, leg, contacts, targets, leg_free)
 
