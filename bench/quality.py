@@ -21,7 +21,7 @@ ROOT = Path(__file__).resolve().parents[1]
 MOTIONS = ROOT.parent / "shared" / "motions"
 MIXAMO = ("Joe_",)  # clips scored with the paper's mixamo24 protocol
 # The paper's sampler (no edge margin, no foot cleanup) and what `sinmdm-run sample` does.
-SAMPLER_VARIANTS = {"faithful": {"margin": 0, "cleanup": False}, "default": {}}
+SAMPLER_VARIANTS = {"faithful": {"margin": 0, "cleanup": False, "smooth": 0.0}, "default": {}}
 
 
 def run(*args: str) -> None:

@@ -81,7 +81,7 @@ def main() -> None:
     rows = [row]
     if args.faithful:
         rows.append(sample_and_score(model, clip, run_dir / f"samples_{args.steps}_faithful", args.steps,
-                                     args.samples, eval_protocol(args.clip), margin=0, cleanup=False))
+                                     args.samples, eval_protocol(args.clip), margin=0, cleanup=False, smooth=0.0))
     print(json.dumps(rows))
     # read again: other ablations may have finished (and appended) while this one trained
     results = json.loads(args.results.read_text()) if args.results.exists() else []

@@ -34,10 +34,14 @@ def test_calibrate_writes_the_measured_defaults(demo_copy: Path):
     result = run_cli("sinmdm", "calibrate", str(demo_copy), "--clip", str(DEMO_CLIP), "--samples", "2",
                      "--threads", "2", "--json", check=True)
     chosen = json.loads(result.stdout)
-    assert [(t["steps"], t["hop"]) for t in chosen["trials"]] == [(50, 32), (30, 32), (20, 32), (20, 48), (10, 48)]
+    tried = [(t["steps"], t["hop"], t["smooth"]) for t in chosen["trials"]]
+    assert tried[:5] == [(50, 32, 0), (30, 32, 0), (20, 32, 0), (20, 48, 0), (10, 48, 0)]
+    raw = next(t for t in chosen["trials"] if (t["steps"], t["hop"], t["smooth"]) == (chosen["steps"], chosen["hop"], 0))
+    # smoothing is tried on the chosen setting only when its samples shake more than the clip
+    assert tried[5:] == ([(chosen["steps"], chosen["hop"], 1.0)] if raw["jitter_ratio"] > 1 else [])
     model = load_model(demo_copy)
-    assert model.metadata["sampling_defaults"] == {"steps": chosen["steps"], "hop": chosen["hop"]}
-    assert model.default_steps == chosen["steps"]
+    assert model.metadata["sampling_defaults"] == {k: chosen[k] for k in ("steps", "hop", "smooth")}
+    assert model.default_steps == chosen["steps"] and model.default_smooth == chosen["smooth"]
     provenance = model.metadata["provenance"]
     assert provenance["sampling_scores"] == chosen["scores"] and provenance["calibrated"]["samples"] == 2
     stored = next(e.value for e in onnx.load(str(demo_copy)).metadata_props if e.key == "sinmdm")

@@ -131,6 +131,8 @@ CASES: dict[str, Callable] = {
     "sampling defaults a string": set_key("sampling_defaults", "fast"),
     "sampling steps a string": set_key("sampling_defaults", {"steps": "50", "hop": 8}),
     "sampling hop zero": set_key("sampling_defaults", {"steps": 50, "hop": 0}),
+    "sampling smooth negative": set_key("sampling_defaults", {"steps": 50, "hop": 8, "smooth": -1.0}),
+    "sampling smooth too wide": set_key("sampling_defaults", {"steps": 50, "hop": 8, "smooth": 50}),
     "velocity unit unknown": set_key("velocity_unit", "minute"),
     "provenance a string": set_key("provenance", "trained by me"),
     "model id a number": set_key("model_id", 7),

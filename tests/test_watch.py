@@ -91,7 +91,9 @@ def test_watched_run_logs_checks_and_keeps_best(watched_run):
     config = load_config(watched_run)
     assert config["finished"] and config["watch"]["checks"] == 2
     assert config["watch"]["best_step"] in (5, 10) and (watched_run / BEST).exists()
-    assert config["sampling"]["steps"] in (10, 20, 30, 50) and len(config["sampling"]["trials"]) == 5
+    sampling = config["sampling"]
+    assert sampling["steps"] in (10, 20, 30, 50) and sampling["smooth"] in (0.0, 1.0)
+    assert len(sampling["trials"]) == 5 + (sampling["trials"][-1]["smooth"] == 1.0)  # smoothing tried on shaky samples
     info = json.loads(run_cli("sinmdm", "info", str(watched_run), "--json", check=True).stdout)
     assert info["watch"]["best_step"] == config["watch"]["best_step"] and info["sampling"] == config["sampling"]
     rich = run_cli("sinmdm", "info", str(watched_run), check=True)
@@ -108,12 +110,12 @@ def test_export_carries_the_choice_and_sample_uses_it(watched_run, tmp_path):
     provenance = model.metadata["provenance"]
     assert provenance["checkpoint"]["checkpoint"] == "best"
     assert provenance["checkpoint"]["step"] == config["watch"]["best_step"]
-    assert model.metadata["sampling_defaults"] == {k: config["sampling"][k] for k in ("steps", "hop")}
-    assert model.default_steps == config["sampling"]["steps"]
+    assert model.metadata["sampling_defaults"] == {k: config["sampling"][k] for k in ("steps", "hop", "smooth")}
+    assert model.default_steps == config["sampling"]["steps"] and model.default_smooth == config["sampling"]["smooth"]
     out = run_cli("sinmdm-run", "sample", str(model_path), "--frames", "96", "--out", str(tmp_path / "s"), "--json",
                   check=True)
     summary = json.loads(out.stdout)
-    assert summary["steps"] == config["sampling"]["steps"] and summary["hop"] == config["sampling"]["hop"]
+    assert (summary["steps"], summary["hop"], summary["smooth"]) == tuple(config["sampling"][k] for k in ("steps", "hop", "smooth"))
     forced = json.loads(run_cli("sinmdm-run", "sample", str(model_path), "--frames", "96", "--steps", "7", "--hop", "12",
                                 "--out", str(tmp_path / "f"), "--json", check=True).stdout)
     assert forced["steps"] == 7 and forced["hop"] == 12

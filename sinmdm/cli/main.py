@@ -129,7 +129,14 @@ def train(
                       + ("  [bold]chosen[/bold]" if stage["chosen"] else "  (the first stage is kept)"))
     sampling = kept_sampling(out, result)
     if sampling:
-        console.print(f"sampling defaults measured on the kept weights: {sampling['steps']} steps, hop {sampling['hop']}")
+        console.print(f"sampling defaults measured on the kept weights: {sampling['steps']} steps, hop {sampling['hop']}"
+                      + _smooth_words(sampling))
+
+
+def _smooth_words(sampling: dict) -> str:
+    """", smoothing 1 frame" where the measured defaults carry a smoothing (older runs have none)."""
+    smooth = sampling.get("smooth")
+    return "" if smooth is None else (f", smoothing {smooth:g} frame(s)" if smooth else ", no smoothing")
 
 
 def _scores_line(scores: dict) -> str:
@@ -204,7 +211,7 @@ def info(
                          if best else "") + f" (details: sinmdm info {Path(run_dir) / stage['dir']})")
     sampling = summary["sampling"]
     if sampling:
-        console.print(f"sampling defaults: {sampling['steps']} steps, hop {sampling['hop']} "
+        console.print(f"sampling defaults: {sampling['steps']} steps, hop {sampling['hop']}{_smooth_words(sampling)} "
                       f"(coverage {sampling['scores']['coverage']:.1f} %, global {sampling['scores']['global_diversity']:.2f})")
 
 
@@ -260,7 +267,7 @@ def calibrate(
     threads: Optional[int] = typer.Option(None, "--threads", help="onnxruntime threads (default: all cores)."),
     as_json: bool = typer.Option(False, "--json", help="Print one JSON object."),
 ) -> None:
-    """Measure a model's sampling defaults (steps, hop) against its clip and store them in its metadata."""
+    """Measure a model's sampling defaults (steps, hop, smoothing) against its clip and store them in its metadata."""
     _require_torch()
     from ..eval.balance import BALANCE_TOLERANCE
     from ..export.calibrate import calibrate_model
@@ -269,14 +276,14 @@ def calibrate(
     if as_json:
         print_json(chosen)
         return
-    table = Table("steps", "hop", "coverage %", "global div", "local div", "jitter (x clip)", "balance", "seconds")
+    table = Table("steps", "hop", "smooth", "coverage %", "global div", "local div", "jitter (x clip)", "balance", "seconds")
     for t in chosen["trials"]:
-        table.add_row(str(t["steps"]), str(t["hop"]), f"{t['coverage']:.1f}", f"{t['global_diversity']:.2f}",
+        table.add_row(str(t["steps"]), str(t["hop"]), f"{t['smooth']:g}", f"{t['coverage']:.1f}", f"{t['global_diversity']:.2f}",
                       f"{t['local_diversity']:.2f}", f"{t['jitter_ratio']:.2f}", f"{t['balance']:.3f}",
                       f"{t['check_seconds']:.1f}")
     console.print(table)
-    console.print(f"sampling defaults: {chosen['steps']} steps, hop {chosen['hop']} (the cheapest setting within "
-                  f"{BALANCE_TOLERANCE:g} of the first's balance), written into {', '.join(str(m) for m in models)}")
+    console.print(f"sampling defaults: {chosen['steps']} steps, hop {chosen['hop']}{_smooth_words(chosen)} (the cheapest "
+                  f"setting within {BALANCE_TOLERANCE:g} of the first's balance), written into {', '.join(str(m) for m in models)}")
 
 
 @app.command()

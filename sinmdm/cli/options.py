@@ -11,7 +11,8 @@ from typing import TYPE_CHECKING, Annotated, Callable, Optional
 import typer
 
 from ..runtime.model import MAX_THREADS
-from ..runtime.options import DEFAULT_STEPS, EDGE_MARGIN, SamplingOptions
+from ..runtime.options import DEFAULT_SMOOTH, DEFAULT_STEPS, EDGE_MARGIN, SamplingOptions
+from ..runtime.smoothing import MAX_SMOOTH
 from .common import console, print_json
 
 if TYPE_CHECKING:
@@ -35,6 +36,9 @@ Margin = Annotated[int, typer.Option("--margin", help="Frames sampled beyond eac
                                      "(steadier first and last frames; 0 = the paper's sampler).")]
 Cleanup = Annotated[bool, typer.Option("--cleanup/--no-cleanup", help="Pin the feet (contact joints) where the model "
                                        "predicts contacts, with IK on the legs (removes foot sliding).")]
+Smooth = Annotated[Optional[float], typer.Option("--smooth", help="Smooth the sampled motion over time: a Gaussian "
+                                                 f"of this many frames (sigma, 0..{MAX_SMOOTH:g}; default: the model's measured "
+                                                 f"setting, else {DEFAULT_SMOOTH:g}; 0 = off, the paper's sampler).")]
 Threads = Annotated[Optional[int], typer.Option("--threads", help=f"onnxruntime threads, 1..{MAX_THREADS} "
                                                 "(default: all cores).")]
 Provider = Annotated[str, typer.Option("--provider", help="onnxruntime execution provider: cpu (default, the tested "
@@ -72,7 +76,7 @@ def _common_parameters(default_name: str) -> list[inspect.Parameter]:
     keyword = inspect.Parameter.KEYWORD_ONLY
     common = [("count", Count, 1), ("seed", Seed, 0), ("sampler", Sampler, "ddpm"), ("steps", Steps, None),
               ("eta", Eta, 0.0), ("hop", Hop, None), ("margin", Margin, EDGE_MARGIN), ("cleanup", Cleanup, True),
-              ("threads", Threads, None), ("provider", Provider, "cpu"), ("out", Out, Path("sinmdm_out")), ("name", Name, default_name),
+              ("smooth", Smooth, None), ("threads", Threads, None), ("provider", Provider, "cpu"), ("out", Out, Path("sinmdm_out")), ("name", Name, default_name),
               ("fmt", Format, "bvh"), ("npz", Npz, False), ("preview", Preview, False), ("force", Force, False),
               ("as_json", Json, False)]
     return [inspect.Parameter(name, keyword, annotation=kind, default=default) for name, kind, default in common]
@@ -117,12 +121,12 @@ def _progress(label: str):
 
 
 def _run_sampling(command: str, body: Callable[..., Job], own: dict, *, models, count, seed, sampler, steps, eta, hop,
-                  margin, cleanup, threads, provider, out, name, fmt, npz, preview, force, as_json) -> None:
+                  margin, cleanup, smooth, threads, provider, out, name, fmt, npz, preview, force, as_json) -> None:
     from ..runtime.outputs import plan_sample_outputs
     from .writers import extra_writers
 
     options = SamplingOptions(count=count, seed=seed, sampler=sampler, steps=steps, eta=eta, hop=hop, margin=margin,
-                              cleanup=cleanup)
+                              cleanup=cleanup, smooth=smooth)
     model = load_cli_model(models, threads, provider)
     job = body(Context(model, options, force), **own)
     resolved = options.resolve(model, job.frames)
@@ -139,7 +143,7 @@ def _run_sampling(command: str, body: Callable[..., Job], own: dict, *, models, 
         "command": command, "model": [str(d.path) for d in model.denoisers.values()], **job.summary,
         "frames": job.frames, "fps": fps, "seconds": job.frames / fps, "count": count, "seed": seed,
         "sampler": sampler, "steps": result.options.steps, "eta": eta, "hop": result.options.hop, "margin": margin,
-        "cleanup": cleanup, "elapsed_seconds": round(result.seconds, 3), "files": [str(p) for p in written], **extra,
+        "cleanup": cleanup, "smooth": result.options.smooth, "elapsed_seconds": round(result.seconds, 3), "files": [str(p) for p in written], **extra,
     }
     if as_json:
         print_json(summary)

@@ -41,6 +41,10 @@ JITTER_LIMIT = 3.0
 # out: the walk's jitter rose to 9x the clip's and the crab's root jumped 3.4x (BENCHMARKS.md).
 SAMPLING_CANDIDATES = ((50, 0.5), (30, 0.5), (20, 0.5), (20, 0.75), (10, 0.75))
 BALANCE_TOLERANCE = 0.02
+# Frames of smoothing (runtime.smoothing) tried on the chosen setting when its samples shake
+# more than the clip, and kept when the balance holds. Samples that already shake no more
+# than the clip get none: smoothing them takes out motion the clip has.
+SMOOTH_CANDIDATE = 1.0
 
 
 def balance(coverage: float, global_diversity: float, jitter_ratio: float | None = None) -> float:
@@ -79,8 +83,8 @@ class CheckSettings:
 
 class ClipScorer:
     """Scores samples of a model against its clip: the paper's metrics, the plausibility
-    aggregate and the balance. Samples are drawn with fixed seeds and no foot cleanup, so
-    two scorings differ by the weights or the sampler settings only."""
+    aggregate and the balance. Samples are drawn with fixed seeds, no foot cleanup and (unless
+    asked) no smoothing, so two scorings differ by the weights or the sampler settings only."""
 
     def __init__(self, reference: BVH, settings: CheckSettings = CheckSettings(), frames: int | None = None,
                  fps: float = 30.0, window: int = 64):
@@ -91,10 +95,10 @@ class ClipScorer:
         self.protocol = protocol_for(reference, self.preset)
         self.reference_features = eval_features(reference, self.protocol)
 
-    def check(self, model: MotionModel, steps: int | None = None, hop: int | None = None) -> dict:
+    def check(self, model: MotionModel, steps: int | None = None, hop: int | None = None, smooth: float = 0.0) -> dict:
         began = time.perf_counter()
-        options = SamplingOptions(count=self.settings.samples, seed=self.settings.seed,
-                                  steps=steps or self.settings.steps, hop=hop or self.settings.hop, cleanup=False)
+        options = SamplingOptions(count=self.settings.samples, seed=self.settings.seed, steps=steps or self.settings.steps,
+                                  hop=hop or self.settings.hop, cleanup=False, smooth=smooth)
         result = generate(model, self.frames, options)
         return {**self.score(result.clips), "check_seconds": round(time.perf_counter() - began, 2)}
 
@@ -117,15 +121,22 @@ class ClipScorer:
 
 
 def choose_sampling(model: MotionModel, scorer: ClipScorer, window: int) -> dict:
-    """Try SAMPLING_CANDIDATES on `model` (the scorer's seeds) and choose the cheapest
-    that keeps the balance: {"steps", "hop", "scores", "trials"}."""
+    """Try SAMPLING_CANDIDATES on `model` (the scorer's seeds), choose the cheapest that
+    keeps the balance, then SMOOTH_CANDIDATE on it when its samples shake more than the
+    clip: {"steps", "hop", "smooth", "scores", "trials"}."""
     trials = []
     for steps, share in SAMPLING_CANDIDATES:
         hop = max(1, int(round(window * share)))
         scores = scorer.check(model, steps=steps, hop=hop)
-        trials.append({"steps": steps, "hop": hop, "cost": steps / share, **scores})
+        trials.append({"steps": steps, "hop": hop, "smooth": 0.0, "cost": steps / share, **scores})
     reference = trials[0]["balance"]
     fine = [t for t in trials if t["balance"] >= reference - BALANCE_TOLERANCE and keepable(t)] or trials[:1]
     chosen = min(fine, key=lambda t: t["cost"])
-    return {"steps": chosen["steps"], "hop": chosen["hop"], "scores": {k: chosen[k] for k in (
-        "coverage", "global_diversity", "local_diversity", "balance", "eval_preset")}, "trials": trials}
+    if chosen["jitter_ratio"] > 1.0:
+        smoothed = {**chosen, "smooth": SMOOTH_CANDIDATE,
+                    **scorer.check(model, steps=chosen["steps"], hop=chosen["hop"], smooth=SMOOTH_CANDIDATE)}
+        trials.append(smoothed)
+        if smoothed["balance"] >= chosen["balance"] - BALANCE_TOLERANCE and keepable(smoothed):
+            chosen = smoothed
+    return {"steps": chosen["steps"], "hop": chosen["hop"], "smooth": chosen["smooth"], "scores": {k: chosen[k] for k in (
+        "coverage", "global_diversity", "local_diversity", "jitter_ratio", "balance", "eval_preset")}, "trials": trials}

@@ -36,7 +36,7 @@ def calibrate_model(paths: list[str | os.PathLike], clip: str | os.PathLike, sam
                   "trials": chosen["trials"]}
 
     def change(document: dict) -> None:
-        document["sampling_defaults"] = {"steps": chosen["steps"], "hop": chosen["hop"]}
+        document["sampling_defaults"] = {k: chosen[k] for k in ("steps", "hop", "smooth")}
         document["provenance"] = {**document["provenance"], "sampling_scores": chosen["scores"],
                                   "calibrated": calibrated}
 

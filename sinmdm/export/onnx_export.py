@@ -209,7 +209,8 @@ def _export_window(model: torch.nn.Module, config: dict, window: int, path: Path
         "model_id": weights_id(model),
         "velocity_unit": config["train"].get("velocity_unit", "frame"),  # runtime.features.model_scale
         # the sampler settings measured with these weights (`sinmdm-run sample` uses them)
-        "sampling_defaults": {k: config["sampling"][k] for k in ("steps", "hop")} if config.get("sampling") else None,
+        "sampling_defaults": {k: config["sampling"][k] for k in ("steps", "hop", "smooth") if k in config["sampling"]}
+        if config.get("sampling") else None,
         "provenance": {
             "clip": config["clip"]["name"],
             "clip_sha256": config["clip"]["sha256"],

@@ -21,6 +21,7 @@ from .heap import release_free_heap
 from .model import MotionModel
 from .options import SamplingOptions
 from .sampler import Guide, cycle_displacement, fit_guide, sample_features
+from .smoothing import smooth_frames
 
 
 @dataclass
@@ -47,16 +48,20 @@ def generate(
     """Sample `options.count` motions of `frames` frames; clip i is reproducible alone with
     seed `options.seed + i`. `loop`: a seamless cycle of `frames` frames (at least one window),
     the last frame flowing into the first, the root moving by `GenerationResult.loop_displacement`
-    per cycle. `adjust` maps the sampled (count, frames, F) features to the ones decoded and returned."""
+    per cycle. The sampled features are smoothed over frames (`options.smooth`; a guide's kept
+    features stay exact), then `adjust` maps the (count, frames, F) features to the ones decoded
+    and returned."""
     began = time.perf_counter()
     options = options.resolve(model, frames, loop)
     features = sample_features(model, frames, options, guide=guide, progress=progress, loop=loop)
     release_free_heap(features.size)
+    keep = None if guide is None else guide.keep
+    kept = None if keep is None else np.broadcast_to(fit_guide(keep, frames), features.shape[:0:-1]).T
+    features = smooth_frames(features, options.smooth, wrap=loop, keep=kept, out=features)
     if adjust is not None:
         features = adjust(features)
     origin = model.start_position if start is None else start
     displacement = cycle_displacement(model.codec, features) if loop else None
-    keep = None if guide is None else guide.keep
     clips = [decode_clip(model, f, origin, options.cleanup, None if displacement is None else displacement[i], keep)
              for i, f in enumerate(features)]
     release_free_heap(features.size)

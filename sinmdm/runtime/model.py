@@ -81,6 +81,14 @@ class MotionModel:
         value = (self.metadata.get("sampling_defaults") or {}).get("steps")
         return int(value) if isinstance(value, int) and 1 <= value <= len(self.alphas_cumprod) else DEFAULT_STEPS
 
+    @property
+    def default_smooth(self) -> float:
+        """Frames of smoothing measured with these weights (export metadata), else DEFAULT_SMOOTH."""
+        from .options import DEFAULT_SMOOTH
+
+        value = (self.metadata.get("sampling_defaults") or {}).get("smooth")
+        return float(value) if isinstance(value, (int, float)) and not isinstance(value, bool) else DEFAULT_SMOOTH
+
     def default_hop(self, frames: int) -> int | None:
         """The measured hop (frames at the training window), scaled to the window `frames`
         uses; None (half a window) when the model carries none."""

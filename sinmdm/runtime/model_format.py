@@ -12,6 +12,7 @@ from pathlib import Path
 from typing import Any, Callable
 
 from .errors import ModelError
+from .smoothing import MAX_SMOOTH
 
 METADATA_KEY = "sinmdm"
 FORMAT_NAME = "sinmdm-denoiser"
@@ -162,7 +163,8 @@ _SCHEMA: dict[str, Check] = {
     "provenance": _of_type(dict, "an object"),
     "model": _of_type(dict, "an object"),
     "start_position": _optional(_list_of(_number(-1e9, 1e9), 2)),
-    "sampling_defaults": _optional(_fields({}, {"steps": _integer(1, MAX_TIMESTEPS), "hop": _integer(1, MAX_WINDOW)})),
+    "sampling_defaults": _optional(_fields({}, {"steps": _integer(1, MAX_TIMESTEPS), "hop": _integer(1, MAX_WINDOW),
+                                                  "smooth": _number(0.0, MAX_SMOOTH)})),
     "velocity_unit": _one_of("frame", "second"),
     # mixed precision (`sinmdm quantize`): int8 convolutions while t > int8_above_t
     "precision": _optional(_fields({"int8_above_t": _integer(0, MAX_TIMESTEPS)})),

@@ -7,6 +7,7 @@ from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING
 
 from .errors import OptionError
+from .smoothing import MAX_SMOOTH
 
 if TYPE_CHECKING:
     from .model import MotionModel
@@ -23,6 +24,10 @@ MAX_STEPS = 1000
 MAX_MARGIN = 10_000
 MAX_SECONDS = 3600.0  # longer motions need `force`
 MAX_FRAMES = 2**31  # beyond any real motion; with `force` anything up to this is attempted
+# The smoothing (frames of Gaussian sigma) of a model that carries no measured setting:
+# one frame took a short-trained idle's samples from 8/8 jittery to 0/8 with the paper's
+# metrics within 0.01 (BENCHMARKS.md, "Where the jitter comes from").
+DEFAULT_SMOOTH = 1.0
 
 
 def check_whole(option: str, value: int, low: int = 0, high: int | None = None) -> int:
@@ -81,6 +86,7 @@ class SamplingOptions:
     hop: int | None = None  # frames between windows; None: the model's measured setting, else half a window
     margin: int = EDGE_MARGIN  # frames sampled beyond each end and cut off (0: the paper's sampler)
     cleanup: bool = True  # pin the contact joints where the model predicts contacts (cleanup.py)
+    smooth: float | None = None  # Gaussian sigma over frames on the sampled features; None: the model's setting; 0: off (the paper)
 
     def __post_init__(self) -> None:
         check_whole("count", self.count, 1, MAX_COUNT)
@@ -95,13 +101,15 @@ class SamplingOptions:
         check_whole("margin", self.margin, 0, MAX_MARGIN)
         if not isinstance(self.cleanup, bool):
             raise OptionError("cleanup", f"must be True or False, got {self.cleanup!r}")
+        if self.smooth is not None:
+            check_number("smooth", self.smooth, high=MAX_SMOOTH)
 
     @property
     def seeds(self) -> list[int]:
         return [self.seed + i for i in range(self.count)]
 
     def resolve(self, model: "MotionModel", frames: int, loop: bool = False) -> "SamplingOptions":
-        """These options with the model's defaults filled in (steps, hop) and checked
+        """These options with the model's defaults filled in (steps, hop, smooth) and checked
         against the model (its chain length, its window for `frames`). A loop takes at
         least DEFAULT_STEPS and half a window: the model's measured settings are chosen on
         plain samples, and at 20 steps a loop's wrap changes velocity 1.5x as much as the
@@ -113,4 +121,5 @@ class SamplingOptions:
         if steps > len(model.alphas_cumprod):
             raise OptionError("steps", f"must be between 1 and {len(model.alphas_cumprod)}, got {steps}")
         hop = (None if loop else model.default_hop(frames)) if self.hop is None else self.hop
-        return replace(self, steps=steps, hop=hop)
+        smooth = model.default_smooth if self.smooth is None else self.smooth
+        return replace(self, steps=steps, hop=hop, smooth=smooth)
