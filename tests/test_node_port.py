@@ -19,6 +19,7 @@ from sinmdm.runtime.model import DEMO_MODEL, load_model
 from sinmdm.runtime.options import SamplingOptions
 from sinmdm.runtime.sampler import WindowedDenoiser, sample_features
 from sinmdm.runtime.schedule import Schedule
+from sinmdm.runtime.smoothing import smooth_frames
 from sinmdm.runtime.vectors import read_array
 
 from .conftest import ROOT, call_cli
@@ -27,10 +28,10 @@ CHECK = ROOT / "ports" / "node" / "check.js"
 TOLERANCE = 1e-4
 # (options of `sinmdm-run vectors`, what sample_features gets for them)
 CASES = {
-    "few-steps": (["--frames", "160", "--steps", "4", "--seed", "3"], dict(frames=160, steps=4, seed=3)),
+    "few-steps": (["--frames", "160", "--steps", "4", "--seed", "3", "--smooth", "1"], dict(frames=160, steps=4, seed=3, smooth=1.0)),
     "default-steps": (["--frames", "160"], dict(frames=160)),
-    "loop-ddim": (["--frames", "100", "--loop", "--hop", "20", "--sampler", "ddim", "--eta", "0.5", "--steps", "6"],
-                  dict(frames=100, loop=True, hop=20, sampler="ddim", eta=0.5, steps=6)),
+    "loop-ddim": (["--frames", "100", "--loop", "--hop", "20", "--sampler", "ddim", "--eta", "0.5", "--steps", "6",
+                   "--smooth", "1.5"], dict(frames=100, loop=True, hop=20, sampler="ddim", eta=0.5, steps=6, smooth=1.5)),
 }
 
 
@@ -78,7 +79,7 @@ def test_the_vectors_are_the_samplers_own_chain_bit_for_bit(model, vectors, name
     schedule = Schedule.from_alphas_cumprod(model.alphas_cumprod, options.steps)
     assert document["options"] == {"frames": frames, "seed": options.seed, "sampler": options.sampler,
                                    "steps": options.steps, "eta": options.eta, "hop": denoise.hop,
-                                   "margin": margin, "loop": loop}
+                                   "margin": margin, "loop": loop, "smooth": options.smooth}
     assert document["window_starts"] == denoise.starts.tolist() and document["length"] == denoise.frames
     assert document["schedule"]["timesteps"] == schedule.timesteps.tolist()
     assert document["denoiser_timesteps"] == schedule.timesteps[::-1].tolist()
@@ -89,7 +90,7 @@ def test_the_vectors_are_the_samplers_own_chain_bit_for_bit(model, vectors, name
     F, L, S = model.features, denoise.frames, len(schedule.timesteps)
     joints = model.codec.skeleton.num_joints
     shapes = {"x_T": (F, L), "noise": (S - 1, F, L), "x_t": (S, F, L), "x0_hat": (S, F, L), "x_0": (F, L),
-              "features": (frames, F), "local_rotations": (frames, joints, 3, 3),
+              "features": (frames, F), "smoothed": (frames, F), "local_rotations": (frames, joints, 3, 3),
               "local_translations": (frames, joints, 3), "positions": (frames, joints, 3)}
     assert {key: tuple(a.shape) for key, a in arrays.items()} == shapes
     assert all((directory / f"{key}.f32").stat().st_size == 4 * a.size for key, a in arrays.items())
@@ -105,7 +106,10 @@ def test_the_vectors_are_the_samplers_own_chain_bit_for_bit(model, vectors, name
             after = schedule.ddim_step(step, arrays["x_t"][k], arrays["x0_hat"][k], options.eta, noise)
         np.testing.assert_array_equal(after, arrays["x_t"][k + 1] if k < S - 1 else arrays["x_0"])
     np.testing.assert_array_equal(arrays["x_0"][:, margin : margin + frames].T, arrays["features"])
-    animation = model.codec.decode(features, model.start_position)
+    smoothed = smooth_frames(features[None], options.smooth, wrap=loop)[0]
+    np.testing.assert_array_equal(arrays["smoothed"], smoothed)
+    assert (options.smooth > 0) == (not np.array_equal(smoothed, features))
+    animation = model.codec.decode(smoothed, model.start_position)
     np.testing.assert_array_equal(arrays["positions"], global_positions(animation).astype(np.float32))
     np.testing.assert_array_equal(arrays["local_rotations"], animation.rotations.astype(np.float32))
 
@@ -168,7 +172,8 @@ def test_the_node_port_reproduces_the_vectors(vectors, name):
     assert result.returncode == 0, result.stdout + result.stderr
     report = json.loads(result.stdout)
     assert report["problems"] == [] and report["ok"]
-    assert report["features"] <= TOLERANCE
+    assert report["features"] <= TOLERANCE and report["smoothed"] <= TOLERANCE
+    assert report["smooth"] == manifest_of(vectors[name])["options"]["smooth"]
     assert report["positions_of_size"] <= TOLERANCE and report["decode_only_positions_of_size"] <= TOLERANCE
     assert report["steps"] == manifest_of(vectors[name])["options"]["steps"]
 

@@ -12,6 +12,7 @@ import pytest
 
 from sinmdm.runtime import SamplingOptions, generate, load_model
 from sinmdm.runtime.errors import OptionError
+from sinmdm.runtime.options import DEFAULT_SMOOTH
 from sinmdm.runtime.sampler import cycle_displacement, sample_features
 from sinmdm.runtime.smoothing import gaussian_weights, smooth_frames
 
@@ -91,11 +92,11 @@ def test_a_smoothed_loop_keeps_its_displacement_per_cycle():
 
 def test_the_models_measured_setting_is_the_default():
     model = load_model()
-    assert model.default_smooth == 1.0  # the demo carries none: DEFAULT_SMOOTH
-    model.metadata["sampling_defaults"] = {**model.metadata["sampling_defaults"], "smooth": 0.0}
-    assert model.default_smooth == 0.0
+    assert model.default_smooth == 0.0  # the demo's samples shake less than its clip (0.6x): calibrated to none
     assert SamplingOptions().resolve(model, 120).smooth == 0.0
     assert SamplingOptions(smooth=2.0).resolve(model, 120).smooth == 2.0
+    del model.metadata["sampling_defaults"]["smooth"]  # a model calibrated before the smoothing existed
+    assert model.default_smooth == DEFAULT_SMOOTH == 1.0
 
 
 @pytest.mark.parametrize("value", [-1.0, 10.5, float("nan"), True, "1"])
@@ -105,12 +106,12 @@ def test_bad_smoothing_is_refused(value):
 
 
 def test_cli_smooth_option(tmp_path):
-    result = call_cli("sinmdm-run", "sample", "--seconds", "3", "--steps", "3", "--smooth", "0", "--out",
+    result = call_cli("sinmdm-run", "sample", "--seconds", "3", "--steps", "3", "--smooth", "1.5", "--out",
                       str(tmp_path / "a"), "--json", check=True)
-    assert json.loads(result.stdout)["smooth"] == 0.0
+    assert json.loads(result.stdout)["smooth"] == 1.5
     result = call_cli("sinmdm-run", "sample", "--seconds", "3", "--steps", "3", "--out", str(tmp_path / "b"), "--json",
                       check=True)
-    assert json.loads(result.stdout)["smooth"] == 1.0
+    assert json.loads(result.stdout)["smooth"] == load_model().default_smooth
     bad = call_cli("sinmdm-run", "sample", "--smooth", "-2", "--out", str(tmp_path / "c"))
     assert bad.returncode == 2 and "smooth" in bad.stderr and len(bad.stderr.strip().splitlines()) == 1
     assert not (tmp_path / "c").exists()

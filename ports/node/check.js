@@ -11,6 +11,7 @@ const { decode } = require('./lib/codec');
 const { InputError, loadMetadata, loadVectors } = require('./lib/files');
 const { sampleFeatures } = require('./lib/sampler');
 const { Schedule } = require('./lib/schedule');
+const { smoothFrames } = require('./lib/smoothing');
 
 const USAGE = 'usage: node check.js MODEL DIR [--json] [--tolerance 1e-4]';
 
@@ -97,12 +98,16 @@ async function check(modelPath, dir, tolerance) {
   if (result.denoiser.starts.join() !== manifest.window_starts.join()) problems.push('window starts differ');
   if (result.denoiser.frames !== T) problems.push(`sampled length ${result.denoiser.frames}, recorded ${T}`);
 
-  const decoded = decode(metadata.codec, result.features, opts.frames, metadata.start_position || [0, 0]);
+  // Vectors written before the smoothing have no `smoothed`: their positions decode `features`.
+  const smoothed = smoothFrames(result.features, opts.frames, F, opts.smooth ?? 0, opts.loop);
+  const recordedSmoothed = arrays.smoothed ? arrays.smoothed.values : arrays.features.values;
+  const decoded = decode(metadata.codec, smoothed, opts.frames, metadata.start_position || [0, 0]);
   const features = maxAbsDiff(result.features, arrays.features.values);
+  const smoothedDiff = maxAbsDiff(smoothed, recordedSmoothed);
   const positions = maxAbsDiff(decoded.positions, arrays.positions.values);
   const rotations = maxAbsDiff(decoded.rotations, arrays.local_rotations.values);
   // Decoding alone, from the recorded features: separates the codec from the chain.
-  const alone = decode(metadata.codec, arrays.features.values, opts.frames, metadata.start_position || [0, 0]);
+  const alone = decode(metadata.codec, recordedSmoothed, opts.frames, metadata.start_position || [0, 0]);
   const decodeOnly = maxAbsDiff(alone.positions, arrays.positions.values) / manifest.figure_size;
   const report = {
     model: modelPath,
@@ -114,6 +119,8 @@ async function check(modelPath, dir, tolerance) {
     x_t: worstXt,
     x0_hat: worstX0,
     features,
+    smooth: opts.smooth ?? 0,
+    smoothed: smoothedDiff,
     positions,
     positions_of_size: positions / manifest.figure_size,
     decode_only_positions_of_size: decodeOnly,
@@ -121,7 +128,7 @@ async function check(modelPath, dir, tolerance) {
     tolerance,
     problems,
   };
-  const within = problems.length === 0 && features <= tolerance && report.positions_of_size <= tolerance && decodeOnly <= tolerance;
+  const within = problems.length === 0 && features <= tolerance && smoothedDiff <= tolerance && report.positions_of_size <= tolerance && decodeOnly <= tolerance;
   report.ok = within;
   return report;
 }
@@ -131,7 +138,7 @@ function print(report) {
   console.log(`model ${report.model}, metadata ${report.metadata}`);
   console.log(`${report.frames} frames, ${report.steps} steps, ${report.windows} windows; schedule coefficients differ by ${e(report.schedule_coefficients)}`);
   console.log(`chain: max |x_t| diff ${e(report.x_t)}, max |x0_hat| diff ${e(report.x0_hat)}`);
-  console.log(`features: max abs diff ${e(report.features)}`);
+  console.log(`features: max abs diff ${e(report.features)}; smoothed (sigma ${report.smooth} frames): ${e(report.smoothed)}`);
   console.log(`positions: max abs diff ${e(report.positions)} file units = ${e(report.positions_of_size)} of the figure's size (decoding alone: ${e(report.decode_only_positions_of_size)})`);
   console.log(`local rotations: max abs diff ${e(report.local_rotations)}`);
   for (const problem of report.problems) console.log(`problem: ${problem}`);

@@ -13,7 +13,7 @@ from rich.tree import Tree
 from ..runtime.errors import OptionError
 from ..runtime.options import EDGE_MARGIN
 from .common import RootOption, UpOption, console, print_json, run_app
-from .options import Context, Eta, Hop, Job, Json, Margin, Sampler, Seed, SourceFps, Steps, Threads, sampling_command
+from .options import Context, Eta, Hop, Job, Json, Margin, Sampler, Seed, Smooth, SourceFps, Steps, Threads, sampling_command
 
 app = typer.Typer(
     name="sinmdm-run",
@@ -201,6 +201,7 @@ def vectors(
     eta: Eta = 0.0,
     hop: Hop = None,
     margin: Margin = EDGE_MARGIN,
+    smooth: Smooth = None,
     loop: bool = typer.Option(False, "--loop", help="Sample a seamless cycle (circular windows)."),
     threads: Threads = None,
     force: bool = typer.Option(False, "--force", help="Write into a non-empty directory, overwriting vectors there."),
@@ -212,7 +213,7 @@ def vectors(
     from ..runtime.options import SamplingOptions, check_length
     from ..runtime.vectors import write_vectors
 
-    options = SamplingOptions(seed=seed, sampler=sampler, steps=steps, eta=eta, hop=hop, margin=margin)
+    options = SamplingOptions(seed=seed, sampler=sampler, steps=steps, eta=eta, hop=hop, margin=margin, smooth=smooth)
     loaded = load_model([model], threads=threads)
     check_length(frames, loaded.codec.fps)
     document = write_vectors(loaded, model, out, frames, options, loop=loop, force=force)
@@ -221,7 +222,7 @@ def vectors(
         return
     opts = document["options"]
     console.print(f"vectors: wrote {len(document['arrays']) + 2} files to [bold]{out}[/bold]: {frames} frames, "
-                  f"seed {seed}, {opts['sampler']} {opts['steps']} steps, hop {opts['hop']}, "
+                  f"seed {seed}, {opts['sampler']} {opts['steps']} steps, hop {opts['hop']}, smoothing {opts['smooth']:g}, "
                   f"{len(document['window_starts'])} window(s) of {document['window']}")
 
 

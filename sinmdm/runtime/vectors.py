@@ -22,6 +22,7 @@ from .atomic import OutputSet, file_sha256
 from .errors import OptionError
 from .model import MotionModel
 from .options import SamplingOptions
+from .smoothing import smooth_frames
 from .rig import skeleton_extent
 from .sampler import STATE_DTYPE, WindowedDenoiser, blend_weights, draw, plan_sampling, sample_loop, to_features
 from .schedule import Schedule
@@ -81,7 +82,7 @@ class Plan:
 
     def bytes(self, model: MotionModel) -> int:
         per_step = 3 * model.features * self.denoise.frames  # x_t, x0_hat, noise
-        decoded = self.frames * (model.features + model.codec.skeleton.num_joints * 15)
+        decoded = self.frames * (2 * model.features + model.codec.skeleton.num_joints * 15)  # features, smoothed, joints
         return 4 * (per_step * len(self.schedule.timesteps) + 2 * model.features * self.denoise.frames + decoded)
 
 
@@ -116,7 +117,8 @@ def record(model: MotionModel, planned: Plan) -> Recording:
     if normals.size != size * steps:
         raise AssertionError(f"the sampler drew {normals.size} normals, expected {size * steps}")
     noise = normals[size:].reshape(steps - 1, model.features, length).astype(STATE_DTYPE)
-    animation = model.codec.decode(features, model.start_position)
+    smoothed = smooth_frames(features[None], options.smooth, wrap=planned.loop)[0]
+    animation = model.codec.decode(smoothed, model.start_position)
     arrays = {
         "x_T": x_T[0],
         "noise": noise,
@@ -124,6 +126,7 @@ def record(model: MotionModel, planned: Plan) -> Recording:
         "x0_hat": np.stack(recorder.x0_hat),
         "x_0": x_0[0],
         "features": features,
+        "smoothed": smoothed,
         "local_rotations": animation.rotations,
         "local_translations": animation.translations,
         "positions": global_positions(animation),
@@ -138,8 +141,9 @@ ARRAY_NOTES = {
     "x0_hat": "row k: the blended x0 prediction at loop iteration k",
     "x_0": "the loop's result, margins included",
     "features": "x_0 without the margins, divided by the model scale (metadata velocity_unit), transposed to (frames, F): what sample_features returns",
-    "local_rotations": "MotionCodec.decode: local rotation matrices, acting on column vectors",
-    "local_translations": "MotionCodec.decode: local translations, file units",
+    "smoothed": "features smoothed over frames (options.smooth, docs/runtime.md 'Smoothing'): what generate decodes",
+    "local_rotations": "MotionCodec.decode of smoothed: local rotation matrices, acting on column vectors",
+    "local_translations": "MotionCodec.decode of smoothed: local translations, file units",
     "positions": "forward kinematics of the decoded animation: world joint positions, file units",
 }
 
@@ -156,7 +160,8 @@ def manifest(model: MotionModel, model_path: Path, recording: Recording) -> dict
         "model": {"file": model_path.name, "sha256": file_sha256(model_path), "model_id": model.metadata["model_id"]},
         "metadata": METADATA,
         "options": {"frames": frames, "seed": options.seed, "sampler": options.sampler, "steps": options.steps,
-                    "eta": options.eta, "hop": denoise.hop, "margin": planned.margin, "loop": planned.loop},
+                    "eta": options.eta, "hop": denoise.hop, "margin": planned.margin, "loop": planned.loop,
+                    "smooth": options.smooth},
         "random": "numpy PCG64 (np.random.default_rng(seed)) standard normals: a port reads them from x_T and noise",
         "state_dtype": np.dtype(STATE_DTYPE).name,
         "length": denoise.frames,
