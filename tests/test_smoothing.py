@@ -115,3 +115,21 @@ def test_cli_smooth_option(tmp_path):
     bad = call_cli("sinmdm-run", "sample", "--smooth", "-2", "--out", str(tmp_path / "c"))
     assert bad.returncode == 2 and "smooth" in bad.stderr and len(bad.stderr.strip().splitlines()) == 1
     assert not (tmp_path / "c").exists()
+
+
+def test_joint_control_keeps_its_joints_exact_with_smoothing():
+    from sinmdm.runtime.applications import load_reference, plan_control, run_plan
+
+    from .conftest import DEMO_CLIP
+
+    model = load_model()
+    reference = load_reference(model, DEMO_CLIP)
+    plan = plan_control(model, reference, joints="upper-body")
+    result = run_plan(model, plan, SamplingOptions(count=2, seed=0, steps=4, smooth=2.0))
+    kept = np.flatnonzero(plan.guide.keep[:, 0])
+    free = np.setdiff1d(np.arange(model.features), kept)
+    for features in result.features:
+        np.testing.assert_allclose(features[:, kept], reference.features[:, kept], atol=1e-5)
+    raw = run_plan(model, plan, SamplingOptions(count=2, seed=0, steps=4, smooth=0.0))
+    assert np.abs(np.diff(result.features[:, :, free], n=3, axis=1)).mean() < np.abs(
+        np.diff(raw.features[:, :, free], n=3, axis=1)).mean()
