@@ -68,8 +68,10 @@ def main() -> None:
             aggregate = scores["plausibility"]["aggregate"]
             row = {"sigma_frames": sigma, "seed": seed, **{k: round(scores[k], 3) for k in ("coverage", "global_diversity", "local_diversity")},
                    "jitter_ratio": round(float(np.mean([s["jitter_ratio"] for s in scores["plausibility"]["samples"]])), 2),
-                   "foot_skating_cm_s": round(aggregate["foot_skating_cm_s"], 2), "implausible": aggregate["implausible"],
-                   "verdicts": dict(Counter(s["verdict"].split(":")[0] for s in scores["plausibility"]["samples"]))}
+                   **{k: round(aggregate[k], 3) for k in ("foot_skating_cm_s", "penetration_cm", "penetration_share",
+                                                          "root_step_max_ratio", "backward_share")},
+                   "implausible": aggregate["implausible"],
+                   "verdicts": dict(Counter(s["verdict"].split(" ")[0].rstrip(":") for s in scores["plausibility"]["samples"]))}
             out["smoothing"].append(row)
             print(row, flush=True)
     if args.results:

@@ -95,11 +95,14 @@ def main() -> None:
         row = next((r for r in results if r["tag"] == tag), None)
         if row is None:
             began = time.perf_counter()
-            run("sinmdm", "train", str(clip), "--out", str(run_dir), "--preset", "cpu", "--steps", str(args.train_steps),
-                "--width", str(args.width), "--checkpoint-every", str(args.train_steps), *extra,
-                *(["--resume"] if (run_dir / "config.json").exists() else []))
-            train_wall = time.perf_counter() - began
-            config = json.loads((run_dir / "config.json").read_text())
+            done = run_dir / "config.json"
+            finished = done.exists() and json.loads(done.read_text()).get("finished")
+            if not finished:  # a finished run (the same command, run before) is scored as it is
+                run("sinmdm", "train", str(clip), "--out", str(run_dir), "--preset", "cpu", "--steps", str(args.train_steps),
+                    "--width", str(args.width), "--checkpoint-every", str(args.train_steps), *extra,
+                    *(["--resume"] if done.exists() else []))
+            config = json.loads(done.read_text())
+            train_wall = time.perf_counter() - began if not finished else config["elapsed_seconds"]
             reference = read_bvh(clip)
             fps = load_model(export_trained_window(run_dir, config["window"])).codec.fps
             row = {"tag": tag, "clip": name, "layout": layout or "as shared", "train_options": extra,

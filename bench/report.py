@@ -222,8 +222,42 @@ def watched_curve_table() -> str:
     return "\n".join(lines) + "\n"
 
 
+SMOOTHING_CLIPS = ("walk", "idle", "xia_normal", "elephant", "crab", "demo")
+
+
+def smoothing_table(date: str = "2026-12-06") -> str:
+    """bench/jitter_sources.py per clip: each smoothing sigma, both seed sets (seed 0 / 1000)."""
+    lines = header("model (clip)", "sigma (frames)", "coverage %", "global div", "local div", "jitter (x clip)",
+                   "skating cm/s", "in floor cm (% frames)", "largest root step (x clip)", "plausible of 8", "verdicts")
+    found = False
+    for clip in SMOOTHING_CLIPS:
+        entry = results(f"smoothing_{clip}_{date}")
+        if entry is None:
+            continue
+        found = True
+        label = f"{clip} ({entry['clip']}, {entry['default_steps']} steps)"
+        for sigma in sorted({r["sigma_frames"] for r in entry["smoothing"]}):
+            rows = [r for r in entry["smoothing"] if r["sigma_frames"] == sigma]
+
+            def cell(key, digits=2, scale=1.0):
+                return " / ".join(fmt(r[key] * scale if r.get(key) is not None else None, digits) for r in rows)
+
+            verdicts = {}
+            for r in rows:
+                for name, n in (r.get("verdicts") or {}).items():
+                    verdicts[name] = verdicts.get(name, 0) + n
+            lines.append(
+                f"| {label} | {sigma:g} | {cell('coverage', 1)} | {cell('global_diversity', 3)} | {cell('local_diversity', 3)} "
+                f"| {cell('jitter_ratio')} | {cell('foot_skating_cm_s')} | {cell('penetration_cm', 1)} ({cell('penetration_share', 0, 100)}) "
+                f"| {cell('root_step_max_ratio')} | {' / '.join(str(8 - r['implausible']) for r in rows)} "
+                f"| {', '.join(f'{k} {v}' for k, v in sorted(verdicts.items()))} |")
+            label = ""
+    return "\n".join(lines) + "\n" if found else "(no smoothing results yet)\n"
+
+
 TABLES = {"WATCHED_TABLE": watched_table, "WATCHED_CURVE_TABLE": watched_curve_table, "LAYOUTS_TABLE": layouts_table,
-          "LAYOUTS_1205_TABLE": lambda: layouts_table("layouts_2026-12-05"), "QUALITY_TABLE": quality_table, "SPEED_TABLE": speed_table, "TRAIN_SPEED_TABLE": train_speed_table,
+          "LAYOUTS_1205_TABLE": lambda: layouts_table("layouts_2026-12-05"),
+          "LAYOUTS_1206_TABLE": lambda: layouts_table("layouts_2026-12-06"), "SMOOTHING_TABLE": smoothing_table, "QUALITY_TABLE": quality_table, "SPEED_TABLE": speed_table, "TRAIN_SPEED_TABLE": train_speed_table,
           "STEPS_TABLE": steps_table, "RECIPE_TABLE": recipe_table, "FAST_SAMPLING_TABLE": fast_sampling_table}
 
 

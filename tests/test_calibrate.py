@@ -10,6 +10,7 @@ from pathlib import Path
 import onnx
 import pytest
 
+from sinmdm.eval.balance import SMOOTH_CANDIDATES
 from sinmdm.runtime import load_model
 from sinmdm.runtime.model import DEMO_MODEL
 
@@ -36,9 +37,13 @@ def test_calibrate_writes_the_measured_defaults(demo_copy: Path):
     chosen = json.loads(result.stdout)
     tried = [(t["steps"], t["hop"], t["smooth"]) for t in chosen["trials"]]
     assert tried[:5] == [(50, 32, 0), (30, 32, 0), (20, 32, 0), (20, 48, 0), (10, 48, 0)]
-    raw = next(t for t in chosen["trials"] if (t["steps"], t["hop"], t["smooth"]) == (chosen["steps"], chosen["hop"], 0))
-    # smoothing is tried on the chosen setting only when its samples shake more than the clip
-    assert tried[5:] == ([(chosen["steps"], chosen["hop"], 1.0)] if raw["jitter_ratio"] > 1 else [])
+    # smoothing is tried on the chosen setting (SMOOTH_CANDIDATES in turn) while its samples shake more than the clip
+    smoothing = chosen["trials"][5:]
+    assert [(t["steps"], t["hop"]) for t in smoothing] == [(chosen["steps"], chosen["hop"])] * len(smoothing)
+    assert [t["smooth"] for t in smoothing] == list(SMOOTH_CANDIDATES[: len(smoothing)])
+    raw = next(t for t in chosen["trials"][:5] if (t["steps"], t["hop"]) == (chosen["steps"], chosen["hop"]))
+    assert (raw["jitter_ratio"] > 1) == bool(smoothing)
+    assert chosen["smooth"] in [0.0] + [t["smooth"] for t in smoothing]
     model = load_model(demo_copy)
     assert model.metadata["sampling_defaults"] == {k: chosen[k] for k in ("steps", "hop", "smooth")}
     assert model.default_steps == chosen["steps"] and model.default_smooth == chosen["smooth"]

@@ -41,10 +41,14 @@ JITTER_LIMIT = 3.0
 # out: the walk's jitter rose to 9x the clip's and the crab's root jumped 3.4x (BENCHMARKS.md).
 SAMPLING_CANDIDATES = ((50, 0.5), (30, 0.5), (20, 0.5), (20, 0.75), (10, 0.75))
 BALANCE_TOLERANCE = 0.02
-# Frames of smoothing (runtime.smoothing) tried on the chosen setting when its samples shake
-# more than the clip, and kept when the balance holds. Samples that already shake no more
-# than the clip get none: smoothing them takes out motion the clip has.
-SMOOTH_CANDIDATE = 1.0
+# Frames of smoothing (runtime.smoothing) tried in turn on the chosen setting while its
+# samples shake more than the clip, each kept when the balance holds (within
+# BALANCE_TOLERANCE of the unsmoothed setting's). Samples that already shake no more than
+# the clip get no more: smoothing them takes out motion the clip has. 2 frames is not
+# tried: on the walk it cut the forearm's speed peaks by a quarter (1 frame: under a
+# tenth) and its global diversity by 0.09, beyond what the balance sees on a model short
+# of coverage (docs/smoothing_walk.png, BENCHMARKS.md).
+SMOOTH_CANDIDATES = (1.0,)
 
 
 def balance(coverage: float, global_diversity: float, jitter_ratio: float | None = None) -> float:
@@ -122,7 +126,7 @@ class ClipScorer:
 
 def choose_sampling(model: MotionModel, scorer: ClipScorer, window: int) -> dict:
     """Try SAMPLING_CANDIDATES on `model` (the scorer's seeds), choose the cheapest that
-    keeps the balance, then SMOOTH_CANDIDATE on it when its samples shake more than the
+    keeps the balance, then SMOOTH_CANDIDATES on it while its samples shake more than the
     clip: {"steps", "hop", "smooth", "scores", "trials"}."""
     trials = []
     for steps, share in SAMPLING_CANDIDATES:
@@ -132,11 +136,14 @@ def choose_sampling(model: MotionModel, scorer: ClipScorer, window: int) -> dict
     reference = trials[0]["balance"]
     fine = [t for t in trials if t["balance"] >= reference - BALANCE_TOLERANCE and keepable(t)] or trials[:1]
     chosen = min(fine, key=lambda t: t["cost"])
-    if chosen["jitter_ratio"] > 1.0:
-        smoothed = {**chosen, "smooth": SMOOTH_CANDIDATE,
-                    **scorer.check(model, steps=chosen["steps"], hop=chosen["hop"], smooth=SMOOTH_CANDIDATE)}
+    unsmoothed = chosen["balance"]
+    for sigma in SMOOTH_CANDIDATES:
+        if chosen["jitter_ratio"] <= 1.0:
+            break
+        smoothed = {**chosen, "smooth": sigma, **scorer.check(model, steps=chosen["steps"], hop=chosen["hop"], smooth=sigma)}
         trials.append(smoothed)
-        if smoothed["balance"] >= chosen["balance"] - BALANCE_TOLERANCE and keepable(smoothed):
-            chosen = smoothed
+        if smoothed["balance"] < unsmoothed - BALANCE_TOLERANCE or not keepable(smoothed):
+            break
+        chosen = smoothed
     return {"steps": chosen["steps"], "hop": chosen["hop"], "smooth": chosen["smooth"], "scores": {k: chosen[k] for k in (
         "coverage", "global_diversity", "local_diversity", "jitter_ratio", "balance", "eval_preset")}, "trials": trials}
