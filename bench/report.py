@@ -255,9 +255,39 @@ def smoothing_table(date: str = "2026-12-06") -> str:
     return "\n".join(lines) + "\n" if found else "(no smoothing results yet)\n"
 
 
+def contact_floors_table(date: str = "2026-12-06") -> str:
+    """bench/contact_floors.py per clip: pins as sampled against lifted, both seed sets (seed 0 / 1000)."""
+    lines = header("model (clip)", "pins", "coverage %", "global div", "local div", "in floor cm (% frames)",
+                   "skating cm/s", "bobbing cm/s", "jitter (x clip)", "plausible of 8", "verdicts")
+    found = False
+    for clip in SMOOTHING_CLIPS:
+        entry = results(f"contact_floors_{clip}_{date}")
+        if entry is None:
+            continue
+        found = True
+        label = f"{clip} ({entry['clip']})"
+        for arm in ("as sampled", "lifted"):
+            rows = [r for r in entry["rows"] if r["pins"] == arm]
+
+            def cell(key, digits=2, scale=1.0):
+                return " / ".join(fmt(r[key] * scale, digits) for r in rows)
+
+            verdicts = {}
+            for r in rows:
+                for name, n in r["verdicts"].items():
+                    verdicts[name] = verdicts.get(name, 0) + n
+            lines.append(
+                f"| {label} | {arm} | {cell('coverage', 1)} | {cell('global_diversity', 3)} | {cell('local_diversity', 3)} "
+                f"| {cell('penetration_cm', 1)} ({cell('penetration_share', 0, 100)}) | {cell('foot_skating_cm_s')} "
+                f"| {cell('foot_bob_cm_s')} | {cell('jitter_ratio')} | {' / '.join(str(8 - r['implausible']) for r in rows)} "
+                f"| {', '.join(f'{k} {v}' for k, v in sorted(verdicts.items()))} |")
+            label = ""
+    return "\n".join(lines) + "\n" if found else "(no contact floor results yet)\n"
+
+
 TABLES = {"WATCHED_TABLE": watched_table, "WATCHED_CURVE_TABLE": watched_curve_table, "LAYOUTS_TABLE": layouts_table,
           "LAYOUTS_1205_TABLE": lambda: layouts_table("layouts_2026-12-05"),
-          "LAYOUTS_1206_TABLE": lambda: layouts_table("layouts_2026-12-06"), "SMOOTHING_TABLE": smoothing_table, "QUALITY_TABLE": quality_table, "SPEED_TABLE": speed_table, "TRAIN_SPEED_TABLE": train_speed_table,
+          "LAYOUTS_1206_TABLE": lambda: layouts_table("layouts_2026-12-06"), "SMOOTHING_TABLE": smoothing_table, "CONTACT_FLOORS_TABLE": contact_floors_table, "QUALITY_TABLE": quality_table, "SPEED_TABLE": speed_table, "TRAIN_SPEED_TABLE": train_speed_table,
           "STEPS_TABLE": steps_table, "RECIPE_TABLE": recipe_table, "FAST_SAMPLING_TABLE": fast_sampling_table}
 
 

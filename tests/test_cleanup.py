@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -12,7 +13,7 @@ from sinmdm.eval.plausibility import plausibility
 from sinmdm.runtime import SamplingOptions, generate, load_model, read_bvh
 from sinmdm.runtime.animation import Animation, animation_from_bvh, animation_to_bvh, global_positions
 from sinmdm.runtime.cleanup import cleanup_contacts, contact_intervals, contact_offsets
-from sinmdm.runtime.features import build_codec
+from sinmdm.runtime.features import MotionCodec, build_codec
 
 from .conftest import DEMO_CLIP, real_clip, run_cli
 from .layouts import z_up
@@ -129,6 +130,41 @@ def test_planted_feet_stop_bobbing(demo):
     model, plain, cleaned = demo
     before, after = _bob_while_planted_cm_s(model, plain.clips), _bob_while_planted_cm_s(model, cleaned.clips)
     assert after < before / 2
+
+
+def _planted_heights(model, clips) -> list[np.ndarray]:
+    """Per contact joint: its heights (metres) on frames where it stands still horizontally."""
+    codec = model.codec
+    feet = np.concatenate([global_positions(animation_from_bvh(c))[:, list(codec.contact_joints)] for c in clips]) * codec.scale
+    speed = np.linalg.norm(np.diff(feet, axis=0)[..., list(codec.horizontal_axes)], axis=-1) * codec.fps
+    return [feet[1:, k, codec.up_axis][speed[:, k] < codec.contact_speed] for k in range(feet.shape[1])]
+
+
+def test_planted_feet_are_lifted_to_the_clips_resting_height(demo):
+    """A model that samples a planted foot low is pinned in the floor; with the clip's resting
+    heights (codec.contact_floors, measured at training) no pin lies below them, and a swinging
+    foot that dips under them is raised. Here floors 3 cm above where the demo's cleaned feet
+    stand: the feet come up to them."""
+    model, _, cleaned = demo
+    assert model.codec.contact_floors is None  # the demo predates the field: pins as sampled
+    floors = [float(np.median(h)) + 0.03 for h in _planted_heights(model, cleaned.clips)]
+    lifted = replace(model, codec=replace(model.codec, contact_floors=tuple(floors)))
+    raised = generate(lifted, 240, SamplingOptions(count=4, seed=3))
+    for before, after, floor in zip(_planted_heights(model, cleaned.clips), _planted_heights(lifted, raised.clips), floors):
+        assert np.mean(before < floor - 0.005) > 0.4
+        assert np.mean(after < floor - 0.005) < 0.1
+    # off the contacts too: a swinging foot that dips under its resting height is raised to it
+    codec = model.codec
+    heights = np.concatenate([global_positions(animation_from_bvh(c))[:, list(codec.contact_joints), codec.up_axis]
+                              for c in raised.clips]) * codec.scale
+    assert np.mean(heights < np.array(floors) - 0.005) < 0.01
+
+
+def test_the_clips_resting_heights_are_measured_at_training():
+    codec = build_codec(read_bvh(real_clip("Joe_Walk-In-Circle.bvh")))
+    floors = dict(zip((codec.skeleton.names[j].split(":")[-1] for j in codec.contact_joints), codec.contact_floors))
+    assert 0.015 < floors["LeftToeBase"] < 0.025 and 0.10 < floors["LeftFoot"] < 0.13  # toes on the floor, ankles above
+    assert MotionCodec.from_dict(codec.to_dict()).contact_floors == codec.contact_floors
 
 
 def test_root_is_slowed_to_the_planted_feet_within_the_contact_speed(demo):

@@ -154,14 +154,16 @@ def _run_means(runs: np.ndarray, positions: np.ndarray, frames: np.ndarray, coun
 
 
 def contact_offsets(positions: np.ndarray, inside: np.ndarray, blend: int = BLEND_FRAMES,
-                    carried: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+                    carried: np.ndarray | None = None, floor: tuple[int, float] | None = None) -> tuple[np.ndarray, np.ndarray]:
     """IK offsets of one joint: `anchor` (T, 3) and `weight` (T,) with the applied
     offset = weight * anchor. Inside an interval the anchor takes the joint to the
     interval's mean position (weight 1); around it the boundary offsets fade out and in.
     `carried` (T, 3), NaN where unset: the offset of the planted joint above this one on
     the same foot (the ankle over the ball). A run that overlaps it is pinned where that
     offset carries the joint on the shared frames: pinned on their own means over their
-    own runs, a sliding foot's ankle and ball land further apart than the foot is long."""
+    own runs, a sliding foot's ankle and ball land further apart than the foot is long.
+    `floor` (up axis, height): no pin lies below that height (the joint's resting height in
+    the clip): a model that samples a planted foot low would otherwise pin it in the floor."""
     frames = len(positions)
     index = np.arange(frames)
     runs = np.cumsum(np.diff(np.concatenate([[False], inside]).astype(np.int8)) == 1) * inside  # 1.. per run, 0 outside
@@ -170,6 +172,9 @@ def contact_offsets(positions: np.ndarray, inside: np.ndarray, blend: int = BLEN
         shared = inside & np.isfinite(carried).all(axis=1)
         moved, counts = _run_means(runs, positions + np.nan_to_num(carried), shared, len(means))
         means = np.where(counts[:, None] > 0, moved, means)
+    if floor is not None:
+        up, height = floor
+        means[:, up] = np.maximum(means[:, up], height)
     offset = np.where(inside[:, None], means[runs] - positions, 0.0)
     previous = np.maximum.accumulate(np.where(inside, index, -1))
     following = np.minimum.accumulate(np.where(inside, index, frames)[::-1])[::-1]
@@ -182,12 +187,13 @@ def contact_offsets(positions: np.ndarray, inside: np.ndarray, blend: int = BLEN
 
 
 def _cyclic_offsets(positions: np.ndarray, inside: np.ndarray, shift: np.ndarray, blend: int,
-                    carried: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+                    carried: np.ndarray | None = None, floor: tuple[int, float] | None = None) -> tuple[np.ndarray, np.ndarray]:
     """contact_offsets on a loop: the cycle tiled three times (moved by `shift` per cycle)
     so that intervals and fades wrap across the seam; the middle copy is returned."""
     frames = len(positions)
     tiled = np.concatenate([positions - shift, positions, positions + shift])
-    anchor, weight = contact_offsets(tiled, np.tile(inside, 3), blend, None if carried is None else np.tile(carried, (3, 1)))
+    anchor, weight = contact_offsets(tiled, np.tile(inside, 3), blend, None if carried is None else np.tile(carried, (3, 1)),
+                                     floor)
     return anchor[frames : 2 * frames], weight[frames : 2 * frames]
 
 
@@ -525,10 +531,38 @@ def cleanup_contacts(animation: Animation, codec, features: np.ndarray,
         if (grown == inside).all():
             break
         inside = grown
+    _lift_from_floor(animation, local, codec, legs, free)
     solved = local[:, changed]
     finite = np.isfinite(solved).all(axis=(-1, -2))  # never NaN: a joint whose solve failed keeps its pose
     local[:, changed] = np.where(finite[..., None, None], solved, original)
     return Animation(animation.skeleton, local, animation.translations, animation.fps)
+
+
+def _lift_from_floor(animation: Animation, local: np.ndarray, codec, legs: list[Leg], free: list) -> None:
+    """In place on `local`: on every frame where a leg's contact joint lies below its resting
+    height in the clip (`codec.contact_floors`), the leg's effector (an ankle) is raised by
+    the deepest such depth, the foot keeping its orientation. A model's
+    swinging toes dip through the floor (a short-trained walk: 2 cm on a fifth of its frames,
+    mostly off its contacts, where no pin reaches). The raise falls to zero where the dip ends,
+    so it blends itself in and out."""
+    if codec.contact_floors is None:
+        return
+    contacts, up = list(codec.contact_joints), codec.up_axis
+    if not legs:
+        return
+    positions = positions_by_chunks(local, animation.translations, animation.skeleton.parents)
+    depth = np.asarray(codec.contact_floors) / codec.scale - positions[:, contacts, up]  # (T, C)
+    for leg, leg_free in zip(legs, free):
+        lift = np.maximum(depth[:, list(leg.contacts)].max(axis=1), 0.0)
+        if not lift.any():
+            continue
+        anchors, weights = np.zeros((len(local), len(contacts), 3)), np.zeros((len(local), len(contacts)))
+        # Every contact of the leg asks for the same raise: the effector moves by it and its
+        # lower contacts, carried rigidly with the foot, already stand where they aim.
+        anchors[:, list(leg.contacts), up] = lift[:, None]
+        weights[:, list(leg.contacts)] = (lift > 0)[:, None]
+        targets = _Targets(positions, anchors, weights, up, np.full(len(contacts), -np.inf))
+        _solve_leg(local, animation.translations, animation.skeleton.parents, leg, contacts, targets, leg_free)
 
 
 def _pin(animation: Animation, local: np.ndarray, codec, legs: list[Leg], free: list, positions: np.ndarray,
@@ -543,10 +577,13 @@ def _pin(animation: Animation, local: np.ndarray, codec, legs: list[Leg], free: 
             carried = None
             if k in above:
                 carried = np.where(inside[:, above[k], None], anchors[:, above[k]], np.nan)
+            floor = None if codec.contact_floors is None else (up, codec.contact_floors[k] / codec.scale)
             if shift is None:
-                anchors[:, k], weights[:, k] = contact_offsets(positions[:, contacts[k]], inside[:, k], carried=carried)
+                anchors[:, k], weights[:, k] = contact_offsets(positions[:, contacts[k]], inside[:, k], carried=carried,
+                                                               floor=floor)
             else:
-                anchors[:, k], weights[:, k] = _cyclic_offsets(positions[:, contacts[k]], inside[:, k], shift, BLEND_FRAMES, carried)
+                anchors[:, k], weights[:, k] = _cyclic_offsets(positions[:, contacts[k]], inside[:, k], shift, BLEND_FRAMES,
+                                                               carried, floor)
     pinned = positions[:, contacts, up] + anchors[..., up]
     floors = np.where(inside, pinned, np.inf).min(axis=0)
     targets = _Targets(positions, anchors, weights, up, floors)

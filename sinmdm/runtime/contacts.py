@@ -15,6 +15,10 @@ NEAR_FLOOR = 0.10  # a contact joint's lowest point lies this close to the floor
 AT_REST_HEIGHT = 0.03  # a planted joint is this close to its own lowest height
 MIN_PLANTED_SHARE = 0.15  # ... in at least this share of the frames
 NEVER_MOVES = 1e-4  # a joint whose world position spans less than this never leaves its spot
+# A contact joint's resting height: this percentile of its height while it is labelled in
+# contact (the labels are by speed alone, so a foot slowing at the top of a swing counts too;
+# the low end is where it rests).
+FLOOR_PERCENTILE = 10
 # The paper's 0.018 m/frame at 30 fps for a ~1.8 m Mixamo character, as a share of size per second.
 SPEED_PER_SIZE = 0.018 * 30 / 1.8
 
@@ -53,3 +57,11 @@ def detect_contact_joints(positions: np.ndarray, fps: float, size: float, up_axi
     # A static reference root lying on the floor is not a foot.
     moves = np.ptp(positions, axis=0).max(axis=1) > NEVER_MOVES * size
     return [int(j) for j in np.flatnonzero(near_floor & moves & (planted_share >= MIN_PLANTED_SHARE))]
+
+
+def contact_floors(positions: np.ndarray, labels: np.ndarray, up_axis: int = 1) -> np.ndarray:
+    """(C,) each contact joint's resting height in the clip: FLOOR_PERCENTILE of its height on
+    its contact frames (its lowest height where it has none). positions (T, C, 3), labels (T, C)."""
+    height = positions[..., up_axis]
+    return np.array([np.percentile(height[labels[:, c] > 0, c], FLOOR_PERCENTILE) if (labels[:, c] > 0).any()
+                     else height[:, c].min() for c in range(height.shape[1])])

@@ -24,7 +24,7 @@ import numpy as np
 
 from .animation import Animation, animation_from_bvh, chunks_to_bvh, global_positions
 from .bvh import BVH, MAX_FRAME_TIME, MAX_JOINT_FRAMES, MIN_FRAME_TIME, Skeleton
-from .contacts import contact_labels, default_contact_speed, detect_contact_joints
+from .contacts import contact_floors, contact_labels, default_contact_speed, detect_contact_joints
 from .errors import OptionError, SinMDMError
 from .options import check_number
 from .resample import resample_count, resample_linear, resample_rotations
@@ -217,6 +217,9 @@ class MotionCodec:
     height_axis: int = 1  # the trajectory joint's parent-frame axis that points up
     fixed_joints: tuple[int, ...] = ()  # static joints above the trajectory joint
     rest_rotations: np.ndarray | None = None  # (J, 3, 3) used for rotations that are not features (quaternions on disk)
+    # metres, world height: each contact joint's resting height in the clip (contacts.contact_floors);
+    # the cleanup lifts a pin below it. None for models exported before it was measured.
+    contact_floors: tuple[float, ...] | None = None
     layout: FeatureLayout = field(init=False, compare=False)
 
     def __post_init__(self) -> None:
@@ -225,6 +228,8 @@ class MotionCodec:
             raise ValueError(f"rest translations have shape {np.shape(self.rest_translations)}, expected ({joints}, 3)")
         if self.rest_rotations is not None and np.shape(self.rest_rotations) != (joints, 3, 3):
             raise ValueError(f"rest rotations have shape {np.shape(self.rest_rotations)}, expected ({joints}, 3, 3)")
+        if self.contact_floors is not None and len(self.contact_floors) != len(self.contact_joints):
+            raise ValueError(f"{len(self.contact_floors)} contact floors for {len(self.contact_joints)} contact joints")
         object.__setattr__(self, "layout", self._make_layout())
 
     def _make_layout(self) -> FeatureLayout:
@@ -393,6 +398,7 @@ class MotionCodec:
             self.contact_speed, np.asarray(self.rest_translations)[joints], self.resample, self.up_axis,
             self.height_axis, tuple(at[j] for j in self.fixed_joints if j in at),
             None if self.rest_rotations is None else np.asarray(self.rest_rotations)[joints],
+            None if self.contact_floors is None else tuple(f for j, f in zip(self.contact_joints, self.contact_floors) if j in at),
         )
         blocks = {(b.kind, b.joint): b for b in self.layout.blocks}
         channels = [np.arange(blocks[b.kind, b.joint].start, blocks[b.kind, b.joint].stop) for b in codec.layout.blocks]
@@ -415,6 +421,7 @@ class MotionCodec:
             "height_axis": self.height_axis,
             "fixed_joints": [names[j] for j in self.fixed_joints],
             "rest_rotations": None if self.rest_rotations is None else matrix_to_quat(self.rest_rotations).tolist(),
+            **({} if self.contact_floors is None else {"contact_floors": list(self.contact_floors)}),
             "layout": self.layout.to_dict(),
         }
 
@@ -436,6 +443,7 @@ class MotionCodec:
             height_axis=int(data.get("height_axis", 1)),
             fixed_joints=tuple(index[n] for n in data.get("fixed_joints", [])),
             rest_rotations=None if data.get("rest_rotations") is None else quat_to_matrix(np.asarray(data["rest_rotations"], dtype=np.float64)),
+            contact_floors=None if data.get("contact_floors") is None else tuple(float(f) for f in data["contact_floors"]),
         )
         if "layout" in data and codec.layout.to_dict() != data["layout"]:
             raise SinMDMError("stored feature layout does not match the one this version derives")
@@ -489,11 +497,13 @@ def build_codec(
     rest[list(rig.fixed_joints)] = animation.translations[0, list(rig.fixed_joints)]
     rest_rotations = animation.rotations[0] if rig.fixed_joints else None
 
+    positions = global_positions(animation) * scale
     if contacts == "auto":
-        positions = global_positions(animation) * scale
         contact_joints = tuple(detect_contact_joints(positions, fps, size, rig.up_axis))
     else:
         contact_joints = tuple(skeleton.index(name) for name in contacts)
     speed = default_contact_speed(size) if contact_speed is None else float(contact_speed)
+    planted = positions[:, list(contact_joints)]
+    floors = tuple(float(f) for f in contact_floors(planted, contact_labels(planted, fps, speed), rig.up_axis))
     return MotionCodec(skeleton, float(fps), scale, trajectory, moving, contact_joints, speed, rest, resample,
-                       rig.up_axis, rig.height_axis, rig.fixed_joints, rest_rotations)
+                       rig.up_axis, rig.height_axis, rig.fixed_joints, rest_rotations, floors)

@@ -151,6 +151,7 @@ _CODEC = _fields({
     "height_axis": _integer(0, 2),
     "fixed_joints": _list_of(_NAME),
     "rest_rotations": _optional(_list_of(_list_of(_number(-1.0, 1.0), 4))),  # unit quaternions
+    "contact_floors": _optional(_list_of(_number(-1e6, 1e6))),  # metres, one per contact joint
 })
 _SCHEMA: dict[str, Check] = {
     "codec": _CODEC,
