@@ -11,7 +11,8 @@ import onnx
 import pytest
 
 from sinmdm.eval.balance import SMOOTH_CANDIDATES
-from sinmdm.runtime import load_model
+from sinmdm.runtime import load_model, read_bvh
+from sinmdm.runtime.features import build_codec
 from sinmdm.runtime.model import DEMO_MODEL
 
 from .conftest import DEMO_CLIP, real_clip, run_cli
@@ -47,6 +48,9 @@ def test_calibrate_writes_the_measured_defaults(demo_copy: Path):
     model = load_model(demo_copy)
     assert model.metadata["sampling_defaults"] == {k: chosen[k] for k in ("steps", "hop", "smooth")}
     assert model.default_steps == chosen["steps"] and model.default_smooth == chosen["smooth"]
+    # the demo predates the resting heights: calibration records them from its clip, as training does
+    assert load_model(DEMO_MODEL).codec.contact_floors is None
+    assert model.codec.contact_floors == build_codec(read_bvh(DEMO_CLIP)).contact_floors
     provenance = model.metadata["provenance"]
     assert provenance["sampling_scores"] == chosen["scores"] and provenance["calibrated"]["samples"] == 2
     stored = next(e.value for e in onnx.load(str(demo_copy)).metadata_props if e.key == "sinmdm")

@@ -1,5 +1,5 @@
 """Measure an exported model's sampling defaults against its own clip and store them in
-its metadata: what the watched trainer does at the end of a run, for a model that was
+its metadata (with its contact joints' resting heights in the clip when it lacks them): what the watched trainer does at the end of a run, for a model that was
 exported without it (the bundled demo, models of the `paper` preset) or to re-measure
 with more samples. Only the metadata changes; the graph is written back unchanged."""
 
@@ -12,11 +12,23 @@ from pathlib import Path
 import onnx
 
 from ..eval.balance import CheckSettings, ClipScorer, choose_sampling
+from ..runtime.animation import global_positions
 from ..runtime.atomic import OutputSet
+from ..runtime.contacts import resting_heights
+from ..runtime.features import clip_animation
 from ..runtime.errors import SinMDMError
 from ..runtime.model import load_model
 from ..runtime.model_format import sidecar_path
 from .model_files import learned_clip, one_folder, write_with_metadata
+
+
+def clip_resting_heights(model, reference) -> tuple[float, ...]:
+    """The resting heights (metres) of the model's contact joints in its clip, as training
+    records them (runtime.contacts.resting_heights)."""
+    codec = model.codec
+    animation = clip_animation(reference, codec.fps, codec.resample)
+    positions = global_positions(animation)[:, list(codec.contact_joints)] * codec.scale
+    return resting_heights(positions, codec.fps, codec.contact_speed, codec.up_axis)
 
 
 def calibrate_model(paths: list[str | os.PathLike], clip: str | os.PathLike, samples: int = CheckSettings.samples,
@@ -35,8 +47,12 @@ def calibrate_model(paths: list[str | os.PathLike], clip: str | os.PathLike, sam
     calibrated = {"date": datetime.now(timezone.utc).isoformat(timespec="seconds"), "samples": samples,
                   "trials": chosen["trials"]}
 
+    floors = None if model.codec.contact_floors is not None else clip_resting_heights(model, reference)
+
     def change(document: dict) -> None:
         document["sampling_defaults"] = {k: chosen[k] for k in ("steps", "hop", "smooth")}
+        if floors is not None:  # a model trained before they were recorded: the cleanup's floor
+            document["codec"]["contact_floors"] = list(floors)
         document["provenance"] = {**document["provenance"], "sampling_scores": chosen["scores"],
                                   "calibrated": calibrated}
 

@@ -65,3 +65,9 @@ def contact_floors(positions: np.ndarray, labels: np.ndarray, up_axis: int = 1) 
     height = positions[..., up_axis]
     return np.array([np.percentile(height[labels[:, c] > 0, c], FLOOR_PERCENTILE) if (labels[:, c] > 0).any()
                      else height[:, c].min() for c in range(height.shape[1])])
+
+
+def resting_heights(positions: np.ndarray, fps: float, speed: float, up_axis: int = 1) -> tuple[float, ...]:
+    """Each contact joint's resting height (`contact_floors`) with its contacts labelled by
+    `speed`: what a codec records (MotionCodec.contact_floors). positions (T, C, 3), metres."""
+    return tuple(float(f) for f in contact_floors(positions, contact_labels(positions, fps, speed), up_axis))

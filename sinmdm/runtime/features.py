@@ -24,7 +24,7 @@ import numpy as np
 
 from .animation import Animation, animation_from_bvh, chunks_to_bvh, global_positions
 from .bvh import BVH, MAX_FRAME_TIME, MAX_JOINT_FRAMES, MIN_FRAME_TIME, Skeleton
-from .contacts import contact_floors, contact_labels, default_contact_speed, detect_contact_joints
+from .contacts import contact_labels, default_contact_speed, detect_contact_joints, resting_heights
 from .errors import OptionError, SinMDMError
 from .options import check_number
 from .resample import resample_count, resample_linear, resample_rotations
@@ -503,7 +503,6 @@ def build_codec(
     else:
         contact_joints = tuple(skeleton.index(name) for name in contacts)
     speed = default_contact_speed(size) if contact_speed is None else float(contact_speed)
-    planted = positions[:, list(contact_joints)]
-    floors = tuple(float(f) for f in contact_floors(planted, contact_labels(planted, fps, speed), rig.up_axis))
+    floors = resting_heights(positions[:, list(contact_joints)], fps, speed, rig.up_axis)
     return MotionCodec(skeleton, float(fps), scale, trajectory, moving, contact_joints, speed, rest, resample,
                        rig.up_axis, rig.height_axis, rig.fixed_joints, rest_rotations, floors)
