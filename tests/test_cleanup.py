@@ -165,6 +165,8 @@ def test_the_clips_resting_heights_are_measured_at_training():
     floors = dict(zip((codec.skeleton.names[j].split(":")[-1] for j in codec.contact_joints), codec.contact_floors))
     assert 0.015 < floors["LeftToeBase"] < 0.025 and 0.10 < floors["LeftFoot"] < 0.13  # toes on the floor, ankles above
     assert MotionCodec.from_dict(codec.to_dict()).contact_floors == codec.contact_floors
+    upright = build_codec(z_up(read_bvh(real_clip("Joe_Walk-In-Circle.bvh"))))  # heights along Z there
+    assert upright.up_axis == 2 and np.allclose(upright.contact_floors, codec.contact_floors, atol=1e-9)
 
 
 def test_root_is_slowed_to_the_planted_feet_within_the_contact_speed(demo):
