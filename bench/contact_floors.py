@@ -16,12 +16,10 @@ from collections import Counter
 from dataclasses import replace
 from pathlib import Path
 
-import numpy as np
-
 from sinmdm.eval.balance import eval_preset
 from sinmdm.eval.motion_features import evaluate_files
+from sinmdm.export.calibrate import clip_resting_heights
 from sinmdm.runtime import SamplingOptions, generate, load_model, read_bvh, write_outputs
-from sinmdm.runtime.features import build_codec
 
 
 def main() -> None:
@@ -36,11 +34,7 @@ def main() -> None:
     model = load_model(args.model)
     reference = read_bvh(args.clip)
     codec = model.codec
-    floors = codec.contact_floors
-    if floors is None:
-        measured = build_codec(reference, fps=codec.fps, contacts=[codec.skeleton.names[j] for j in codec.contact_joints],
-                               contact_speed=codec.contact_speed)
-        floors = measured.contact_floors
+    floors = codec.contact_floors if codec.contact_floors is not None else clip_resting_heights(model, reference)
     frames = 2 * round(reference.frames / reference.fps * codec.fps)
     protocol = eval_preset(reference)
     out = {"model": str(args.model), "clip": args.clip.name, "frames": frames, "samples": args.samples,

@@ -16,6 +16,7 @@ from collections import Counter
 from pathlib import Path
 
 import numpy as np
+
 from sinmdm.eval.balance import eval_preset
 from sinmdm.eval.motion_features import evaluate_files
 from sinmdm.runtime import SamplingOptions, generate, load_model, read_bvh, write_outputs

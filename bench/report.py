@@ -7,6 +7,7 @@
 from __future__ import annotations
 
 import json
+from collections import Counter
 from pathlib import Path
 
 RESULTS = Path(__file__).resolve().parent / "results"
@@ -225,64 +226,64 @@ def watched_curve_table() -> str:
 SMOOTHING_CLIPS = ("walk", "idle", "xia_normal", "elephant", "crab", "demo")
 
 
+def _clip_entries(name: str, date: str):
+    """(clip, entry) of each SMOOTHING_CLIPS result `{name}_{clip}_{date}` that exists."""
+    for clip in SMOOTHING_CLIPS:
+        entry = results(f"{name}_{clip}_{date}")
+        if entry is not None:
+            yield clip, entry
+
+
+def _per_seed(rows: list[dict]):
+    """cell(key, digits, scale): the rows' values (one per seed set) as "a / b"."""
+    def cell(key: str, digits: int = 2, scale: float = 1.0) -> str:
+        return " / ".join(fmt(None if r.get(key) is None else r[key] * scale, digits) for r in rows)
+    return cell
+
+
+def _plausible_cells(rows: list[dict]) -> str:
+    """The "plausible of 8" and "verdicts" cells of the rows (one per seed set of 8 samples)."""
+    verdicts = Counter()
+    for r in rows:
+        verdicts.update(r.get("verdicts") or {})
+    return (f"{' / '.join(str(8 - r['implausible']) for r in rows)} "
+            f"| {', '.join(f'{k} {v}' for k, v in sorted(verdicts.items()))}")
+
+
 def smoothing_table(date: str = "2026-12-06") -> str:
     """bench/jitter_sources.py per clip: each smoothing sigma, both seed sets (seed 0 / 1000)."""
     lines = header("model (clip)", "sigma (frames)", "coverage %", "global div", "local div", "jitter (x clip)",
                    "skating cm/s", "in floor cm (% frames)", "largest root step (x clip)", "plausible of 8", "verdicts")
-    found = False
-    for clip in SMOOTHING_CLIPS:
-        entry = results(f"smoothing_{clip}_{date}")
-        if entry is None:
-            continue
-        found = True
+    entries = list(_clip_entries("smoothing", date))
+    for clip, entry in entries:
         label = f"{clip} ({entry['clip']}, {entry['default_steps']} steps)"
         for sigma in sorted({r["sigma_frames"] for r in entry["smoothing"]}):
             rows = [r for r in entry["smoothing"] if r["sigma_frames"] == sigma]
-
-            def cell(key, digits=2, scale=1.0):
-                return " / ".join(fmt(r[key] * scale if r.get(key) is not None else None, digits) for r in rows)
-
-            verdicts = {}
-            for r in rows:
-                for name, n in (r.get("verdicts") or {}).items():
-                    verdicts[name] = verdicts.get(name, 0) + n
+            cell = _per_seed(rows)
             lines.append(
                 f"| {label} | {sigma:g} | {cell('coverage', 1)} | {cell('global_diversity', 3)} | {cell('local_diversity', 3)} "
                 f"| {cell('jitter_ratio')} | {cell('foot_skating_cm_s')} | {cell('penetration_cm', 1)} ({cell('penetration_share', 0, 100)}) "
-                f"| {cell('root_step_max_ratio')} | {' / '.join(str(8 - r['implausible']) for r in rows)} "
-                f"| {', '.join(f'{k} {v}' for k, v in sorted(verdicts.items()))} |")
+                f"| {cell('root_step_max_ratio')} | {_plausible_cells(rows)} |")
             label = ""
-    return "\n".join(lines) + "\n" if found else "(no smoothing results yet)\n"
+    return "\n".join(lines) + "\n" if entries else "(no smoothing results yet)\n"
 
 
 def contact_floors_table(date: str = "2026-12-06") -> str:
     """bench/contact_floors.py per clip: pins as sampled against lifted, both seed sets (seed 0 / 1000)."""
     lines = header("model (clip)", "pins", "coverage %", "global div", "local div", "in floor cm (% frames)",
                    "skating cm/s", "bobbing cm/s", "jitter (x clip)", "plausible of 8", "verdicts")
-    found = False
-    for clip in SMOOTHING_CLIPS:
-        entry = results(f"contact_floors_{clip}_{date}")
-        if entry is None:
-            continue
-        found = True
+    entries = list(_clip_entries("contact_floors", date))
+    for clip, entry in entries:
         label = f"{clip} ({entry['clip']})"
         for arm in ("as sampled", "lifted"):
             rows = [r for r in entry["rows"] if r["pins"] == arm]
-
-            def cell(key, digits=2, scale=1.0):
-                return " / ".join(fmt(r[key] * scale, digits) for r in rows)
-
-            verdicts = {}
-            for r in rows:
-                for name, n in r["verdicts"].items():
-                    verdicts[name] = verdicts.get(name, 0) + n
+            cell = _per_seed(rows)
             lines.append(
                 f"| {label} | {arm} | {cell('coverage', 1)} | {cell('global_diversity', 3)} | {cell('local_diversity', 3)} "
                 f"| {cell('penetration_cm', 1)} ({cell('penetration_share', 0, 100)}) | {cell('foot_skating_cm_s')} "
-                f"| {cell('foot_bob_cm_s')} | {cell('jitter_ratio')} | {' / '.join(str(8 - r['implausible']) for r in rows)} "
-                f"| {', '.join(f'{k} {v}' for k, v in sorted(verdicts.items()))} |")
+                f"| {cell('foot_bob_cm_s')} | {cell('jitter_ratio')} | {_plausible_cells(rows)} |")
             label = ""
-    return "\n".join(lines) + "\n" if found else "(no contact floor results yet)\n"
+    return "\n".join(lines) + "\n" if entries else "(no contact floor results yet)\n"
 
 
 TABLES = {"WATCHED_TABLE": watched_table, "WATCHED_CURVE_TABLE": watched_curve_table, "LAYOUTS_TABLE": layouts_table,

@@ -1,6 +1,6 @@
 """Measure an exported model's sampling defaults against its own clip and store them in
-its metadata (with its contact joints' resting heights in the clip when it lacks them): what the watched trainer does at the end of a run, for a model that was
-exported without it (the bundled demo, models of the `paper` preset) or to re-measure
+its metadata (with its contact joints' resting heights in the clip when it lacks them):
+what the watched trainer does at the end of a run, for a model that was exported without it (the bundled demo, models of the `paper` preset) or to re-measure
 with more samples. Only the metadata changes; the graph is written back unchanged."""
 
 from __future__ import annotations
@@ -15,8 +15,8 @@ from ..eval.balance import CheckSettings, ClipScorer, choose_sampling
 from ..runtime.animation import global_positions
 from ..runtime.atomic import OutputSet
 from ..runtime.contacts import resting_heights
-from ..runtime.features import clip_animation
 from ..runtime.errors import SinMDMError
+from ..runtime.features import clip_animation
 from ..runtime.model import load_model
 from ..runtime.model_format import sidecar_path
 from .model_files import learned_clip, one_folder, write_with_metadata

@@ -548,13 +548,12 @@ def _lift_from_floor(animation: Animation, local: np.ndarray, codec, legs: list[
     swinging toes dip through the floor (a short-trained walk: 2 cm on a fifth of its frames,
     mostly off its contacts, where no pin reaches). The raise falls to zero where the dip ends,
     so it blends itself in and out."""
-    if codec.contact_floors is None:
+    floors = _floor_heights(codec)
+    if floors is None or not legs:
         return
     contacts, up = list(codec.contact_joints), codec.up_axis
-    if not legs:
-        return
     positions = positions_by_chunks(local, animation.translations, animation.skeleton.parents)
-    depth = np.asarray(codec.contact_floors) / codec.scale - positions[:, contacts, up]  # (T, C)
+    depth = floors - positions[:, contacts, up]  # (T, C)
     for leg, leg_free in zip(legs, free):
         lift = np.maximum(depth[:, list(leg.contacts)].max(axis=1), 0.0)
         if not lift.any():
@@ -570,19 +569,25 @@ def _lift_from_floor(animation: Animation, local: np.ndarray, codec, legs: list[
         _solve_leg(local, animation.translations, animation.skeleton.parents, leg, contacts, targets, leg_free)
 
 
+def _floor_heights(codec) -> np.ndarray | None:
+    """(C,) each contact joint's resting height in the clip, file units; None when not recorded."""
+    return None if codec.contact_floors is None else np.asarray(codec.contact_floors) / codec.scale
+
+
 def _pin(animation: Animation, local: np.ndarray, codec, legs: list[Leg], free: list, positions: np.ndarray,
          inside: np.ndarray, shift: np.ndarray | None) -> None:
     """Every leg solved, in place on `local` (T, J, 3, 3), for the contact frames `inside` (T, C)."""
     up, contacts = codec.up_axis, list(codec.contact_joints)
     anchors, weights = np.zeros((animation.frames, len(contacts), 3)), np.zeros((animation.frames, len(contacts)))
     # Each lower contact (a ball) below the planted joint that aims it (an ankle): pinned where that joint's pin carries it.
+    resting = _floor_heights(codec)
     above = {m: contacts.index(p) for leg in legs for m, p in zip(_lower_contacts(leg, contacts), leg.pivots) if p in contacts}
     for k in sorted(range(len(contacts)), key=lambda k: len(ancestors(animation.skeleton, contacts[k]))):  # top first
         if inside[:, k].any():
             carried = None
             if k in above:
                 carried = np.where(inside[:, above[k], None], anchors[:, above[k]], np.nan)
-            floor = None if codec.contact_floors is None else (up, codec.contact_floors[k] / codec.scale)
+            floor = None if resting is None else (up, resting[k])
             if shift is None:
                 anchors[:, k], weights[:, k] = contact_offsets(positions[:, contacts[k]], inside[:, k], carried=carried,
                                                                floor=floor)

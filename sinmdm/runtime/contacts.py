@@ -59,15 +59,10 @@ def detect_contact_joints(positions: np.ndarray, fps: float, size: float, up_axi
     return [int(j) for j in np.flatnonzero(near_floor & moves & (planted_share >= MIN_PLANTED_SHARE))]
 
 
-def contact_floors(positions: np.ndarray, labels: np.ndarray, up_axis: int = 1) -> np.ndarray:
-    """(C,) each contact joint's resting height in the clip: FLOOR_PERCENTILE of its height on
-    its contact frames (its lowest height where it has none). positions (T, C, 3), labels (T, C)."""
-    height = positions[..., up_axis]
-    return np.array([np.percentile(height[labels[:, c] > 0, c], FLOOR_PERCENTILE) if (labels[:, c] > 0).any()
-                     else height[:, c].min() for c in range(height.shape[1])])
-
-
 def resting_heights(positions: np.ndarray, fps: float, speed: float, up_axis: int = 1) -> tuple[float, ...]:
-    """Each contact joint's resting height (`contact_floors`) with its contacts labelled by
-    `speed`: what a codec records (MotionCodec.contact_floors). positions (T, C, 3), metres."""
-    return tuple(float(f) for f in contact_floors(positions, contact_labels(positions, fps, speed), up_axis))
+    """(C,) each contact joint's resting height in the clip (MotionCodec.contact_floors):
+    FLOOR_PERCENTILE of its height on the frames it moves slower than `speed` (its lowest
+    height where it never does). positions (T, C, 3), metres."""
+    height, labels = positions[..., up_axis], contact_labels(positions, fps, speed) > 0
+    return tuple(float(np.percentile(height[labels[:, c], c], FLOOR_PERCENTILE)) if labels[:, c].any()
+                 else float(height[:, c].min()) for c in range(height.shape[1]))

@@ -217,7 +217,7 @@ class MotionCodec:
     height_axis: int = 1  # the trajectory joint's parent-frame axis that points up
     fixed_joints: tuple[int, ...] = ()  # static joints above the trajectory joint
     rest_rotations: np.ndarray | None = None  # (J, 3, 3) used for rotations that are not features (quaternions on disk)
-    # metres, world height: each contact joint's resting height in the clip (contacts.contact_floors);
+    # metres, world height: each contact joint's resting height in the clip (contacts.resting_heights);
     # the cleanup lifts a pin below it. None for models exported before it was measured.
     contact_floors: tuple[float, ...] | None = None
     layout: FeatureLayout = field(init=False, compare=False)

@@ -56,8 +56,7 @@ def generate(
     features = sample_features(model, frames, options, guide=guide, progress=progress, loop=loop)
     release_free_heap(features.size)
     keep = None if guide is None else guide.keep
-    kept = None if keep is None else np.broadcast_to(fit_guide(keep, frames), features.shape[:0:-1]).T
-    features = smooth_frames(features, options.smooth, wrap=loop, keep=kept, out=features)
+    features = smooth_frames(features, options.smooth, wrap=loop, keep=kept_features(keep, features.shape[1:]), out=features)
     if adjust is not None:
         features = adjust(features)
     origin = model.start_position if start is None else start
@@ -75,6 +74,10 @@ def decode_clip(model: MotionModel, features: np.ndarray, start: np.ndarray | No
     (except where `keep`, a guide's (F, frames) kept features, holds the legs)."""
     legs = None
     if cleanup:
-        kept = None if keep is None else np.broadcast_to(fit_guide(keep, len(features)), features.shape[::-1]).T
-        legs = cleaned_legs(model.codec, features, start, loop_displacement, kept)
+        legs = cleaned_legs(model.codec, features, start, loop_displacement, kept_features(keep, features.shape))
     return model.codec.decode_bvh(features, start, replaced=legs)
+
+
+def kept_features(keep: np.ndarray | None, shape: tuple[int, int]) -> np.ndarray | None:
+    """A guide's (F, frames) kept features as a (frames, F) view of one sample's `shape`."""
+    return None if keep is None else np.broadcast_to(fit_guide(keep, shape[0]), shape[::-1]).T

@@ -22,10 +22,10 @@ from .atomic import OutputSet, file_sha256
 from .errors import OptionError
 from .model import MotionModel
 from .options import SamplingOptions
-from .smoothing import smooth_frames
 from .rig import skeleton_extent
 from .sampler import STATE_DTYPE, WindowedDenoiser, blend_weights, draw, plan_sampling, sample_loop, to_features
 from .schedule import Schedule
+from .smoothing import smooth_frames
 
 FORMAT_NAME = "sinmdm-vectors"
 FORMAT_VERSION = 1
