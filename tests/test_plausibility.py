@@ -61,6 +61,14 @@ def test_a_sunken_figure_is_named(walk):
     assert "floor" in row["verdict"] and row["penetration_cm"] > 5
 
 
+def test_a_dip_on_a_few_frames_is_named_with_a_share_above_zero(walk):
+    def dip(values):  # the whole figure down 6 cm at frame 300 (60 fps), eased over a few frames: no jump
+        values[:, 1] -= 6.0 * np.exp(-0.5 * ((np.arange(len(values)) - 300) / 2.0) ** 2)
+    row = plausibility(walk, [_edited(walk, dip)])["samples"][0]
+    assert 0 < row["penetration_share"] < 0.01
+    assert row["verdict"].startswith("sinks") and f"{100 * row['penetration_share']:.1f} % of frames" in row["verdict"]
+
+
 def test_eval_reports_plausibility(tmp_path, walk):
     sample = tmp_path / "s.bvh"
     write_bvh(sample, walk)

@@ -172,6 +172,11 @@ def score_sample(ref: Track, sample: Track, codec: MotionCodec, contacts: list[i
     return scores
 
 
+def _percent(share: float) -> str:
+    """A share as a percentage a reader can tell from zero: "0.3 %", not "0 %"."""
+    return f"{100 * share:.1f} %" if 0 < share < 0.01 else f"{100 * share:.0f} %"
+
+
 def verdict(s: dict) -> str:
     if s["root_step_max_ratio"] > TELEPORT_RATIO:
         if s.get("worst_step_contrast", np.inf) > JUMP_CONTRAST:
@@ -184,7 +189,7 @@ def verdict(s: dict) -> str:
         return (f"walks backwards {100 * s['backward_share']:.0f} % of frames (clip: {100 * s['clip_backward_share']:.0f} %, "
                 f"at most {100 * allowed:.0f} % in any half of it)")
     if s["penetration_cm"] > PENETRATION_CM:
-        return f"sinks {s['penetration_cm']:.0f} cm into the floor on {100 * s['penetration_share']:.0f} % of frames"
+        return f"sinks {s['penetration_cm']:.0f} cm into the floor on {_percent(s['penetration_share'])} of frames"
     if s["foot_skating_cm_s"] > SKATING_RATIO * s["clip_foot_skating_cm_s"] + SKATING_SLACK_CM_S:
         return f"feet slide {s['foot_skating_cm_s']:.1f} cm/s while planted (clip: {s['clip_foot_skating_cm_s']:.1f})"
     if s["jitter_ratio"] > JITTER_RATIO:
