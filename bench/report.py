@@ -174,14 +174,17 @@ def _clip_backward(aggregate: dict) -> str:
     return share if half is None else f"{share}, halves <= {fmt(100 * half, 0)}"
 
 
-def watched_table() -> str:
-    """The watched `cpu` recipe per clip beside the previous preset (quality.json) and the paper."""
-    entries = results("watched")
+def watched_table(name: str = "watched", jitter: bool = False) -> str:
+    """The watched `cpu` recipe per clip beside the previous preset (quality.json) and the paper;
+    `jitter`: also the jitter column (results since the plausibility metrics had it)."""
+    entries = results(name)
     if entries is None:
         return "(no watched results yet)\n"
     old = {e["clip"]: e for e in (results("quality") or []) if e.get("preset") == "cpu"}
     lines = header("clip", "recipe", "train it (kept)", "train wall", "sampler", "steps / hop", "coverage %",
-                   "global div", "local div", "foot skating cm/s (clip)", "largest root step (x clip)", "plausible")
+                   "global div", "local div", "foot skating cm/s (clip)", "largest root step (x clip)",
+                   *(["jitter (x clip)"] if jitter else []), "plausible")
+    blank = "| " * (4 if jitter else 3)
     for entry in entries:
         previous = old.get(entry["clip"]) if entry.get("layout") == "as shared" and not entry.get("seed") else None
         if previous:
@@ -189,7 +192,7 @@ def watched_table() -> str:
                 if row.get("steps") == 50 and row.get("variant", "faithful") in ("faithful", None):
                     lines.append(f"| {entry['tag']} | previous `cpu` (3000 it) | {previous['train_steps']} | "
                                  f"{_duration(previous['train_wall_seconds'])} | faithful | 50 / 32 | {fmt(row['coverage'], 1)} | "
-                                 f"{fmt(row['global_diversity'])} | {fmt(row['local_diversity'])} | | | |")
+                                 f"{fmt(row['global_diversity'])} | {fmt(row['local_diversity'])} {blank}|")
                     break
         for row in entry["rows"]:
             a = row.get("plausibility") or {}
@@ -198,10 +201,11 @@ def watched_table() -> str:
                 f"{_duration(entry['train_wall_seconds'])} | {row['variant']} | {row['steps']} / {row['hop']} | "
                 f"{fmt(row['coverage'], 1)} | {fmt(row['global_diversity'])} | {fmt(row['local_diversity'])} | "
                 f"{fmt(a.get('foot_skating_cm_s'), 1)} ({fmt(a.get('clip_foot_skating_cm_s'), 1)}) | "
-                f"{fmt(a.get('root_step_max_ratio'))} | {row['samples'] - a.get('implausible', 0)}/{row['samples']} |")
-    for name, steps, _, c, g, l, _, _ in PAPER_ROWS:
-        if name.startswith("paper: SinMDM"):
-            lines.append(f"| {name} | | | | | {steps} | {fmt(c, 1)} | {fmt(g)} | {fmt(l)} | | | |")
+                f"{fmt(a.get('root_step_max_ratio'))} | " + (f"{fmt(a.get('jitter_ratio'), 1)} | " if jitter else "")
+                + f"{row['samples'] - a.get('implausible', 0)}/{row['samples']} |")
+    for paper, steps, _, c, g, l, _, _ in PAPER_ROWS:
+        if paper.startswith("paper: SinMDM"):
+            lines.append(f"| {paper} | | | | | {steps} | {fmt(c, 1)} | {fmt(g)} | {fmt(l)} {blank}|")
     return "\n".join(lines) + "\n"
 
 
@@ -286,7 +290,7 @@ def contact_floors_table(date: str = "2026-12-06") -> str:
     return "\n".join(lines) + "\n" if entries else "(no contact floor results yet)\n"
 
 
-TABLES = {"WATCHED_TABLE": watched_table, "WATCHED_CURVE_TABLE": watched_curve_table, "LAYOUTS_TABLE": layouts_table,
+TABLES = {"WATCHED_TABLE": watched_table, "WATCHED_1206_TABLE": lambda: watched_table("watched_2026-12-06", jitter=True), "WATCHED_CURVE_TABLE": watched_curve_table, "LAYOUTS_TABLE": layouts_table,
           "LAYOUTS_1205_TABLE": lambda: layouts_table("layouts_2026-12-05"),
           "LAYOUTS_1206_TABLE": lambda: layouts_table("layouts_2026-12-06"), "SMOOTHING_TABLE": smoothing_table, "CONTACT_FLOORS_TABLE": contact_floors_table,
           "LAYOUTS_FLOORS_TABLE": lambda: layouts_table("layouts_floors_2026-12-06"), "QUALITY_TABLE": quality_table, "SPEED_TABLE": speed_table, "TRAIN_SPEED_TABLE": train_speed_table,

@@ -66,10 +66,12 @@ def main() -> None:
             clip = derived_clip(name, layout, args.work)
             run_dir = args.work / tag
             began = time.perf_counter()
-            run("sinmdm", "train", str(clip), "--out", str(run_dir), "--preset", "cpu", "--seed", str(seed),
-                *(["--resume"] if (run_dir / "config.json").exists() else []), *args.train_args)
-            train_wall = time.perf_counter() - began
+            finished = (run_dir / "config.json").exists() and json.loads((run_dir / "config.json").read_text()).get("finished")
+            if not finished:  # a run trained earlier (by this script or by hand) is scored as it is
+                run("sinmdm", "train", str(clip), "--out", str(run_dir), "--preset", "cpu", "--seed", str(seed),
+                    *(["--resume"] if (run_dir / "config.json").exists() else []), *args.train_args)
             config = json.loads((run_dir / "config.json").read_text())
+            train_wall = time.perf_counter() - began if not finished else config["elapsed_seconds"]
             path = export_trained_window(run_dir, config["window"])
             model = load_model(path)
             steps, protocol = model.default_steps, eval_protocol(name)

@@ -72,11 +72,25 @@ def test_watch_stops_a_copying_run_short_of_the_band():
     assert state.best_step == 600 and state.should_stop(3, scores(99, 1.05)) == COPYING
 
 
+def test_checks_can_score_what_sample_gives_with_the_foot_cleanup():
+    """The scorer samples with the cleanup when its settings ask: the demo's feet slide
+    25 cm/s without it (BENCHMARKS.md), and far less with it."""
+    from sinmdm.eval.balance import CheckSettings, ClipScorer
+    from sinmdm.runtime import load_model, read_bvh
+    from sinmdm.runtime.model import DEMO_MODEL
+
+    model, clip = load_model(DEMO_MODEL), read_bvh(DEMO_CLIP)
+    raw, cleaned = (ClipScorer(clip, CheckSettings(samples=2, steps=5, cleanup=c), fps=model.codec.fps,
+                               window=model.trained_window).check(model) for c in (False, True))
+    assert cleaned["foot_skating_cm_s"] < 0.5 * raw["foot_skating_cm_s"]
+
+
 @pytest.fixture(scope="module")
 def watched_run(tmp_path_factory):
     run_dir = tmp_path_factory.mktemp("watched") / "run"
     result = run_cli("sinmdm", "train", str(DEMO_CLIP), "--out", str(run_dir), "--steps", "10", "--width", "32",
-                     "--batch", "4", "--crop", "48", "--checkpoint-every", "5", "--check-every", "5", check=True)
+                     "--batch", "4", "--crop", "48", "--checkpoint-every", "5", "--check-every", "5", "--check-cleanup",
+                     check=True)
     output = result.stdout + result.stderr
     assert "check at step 5" in output and "kept step" in output
     return run_dir
@@ -89,7 +103,7 @@ def test_watched_run_logs_checks_and_keeps_best(watched_run):
         assert {"coverage", "global_diversity", "local_diversity", "balance", "jitter_ratio",
                 "check_seconds"} <= set(record["check"])
     config = load_config(watched_run)
-    assert config["finished"] and config["watch"]["checks"] == 2
+    assert config["finished"] and config["watch"]["checks"] == 2 and config["train"]["check_cleanup"]
     assert config["watch"]["best_step"] in (5, 10) and (watched_run / BEST).exists()
     sampling = config["sampling"]
     assert sampling["steps"] in (10, 20, 30, 50) and sampling["smooth"] in (0.0, *SMOOTH_CANDIDATES)

@@ -55,6 +55,7 @@ def train(
                                            "band, before training stops early (default 3; --steps trains to the end)."),
     norm: Optional[str] = typer.Option(None, "--norm", help="group (the paper's GroupNorm over the window) or frame (per-frame, a strictly local model; see BENCHMARKS.md)."),
     velocity_unit: Optional[str] = typer.Option(None, "--velocity-unit", help="frame (the paper: root velocity in metres per frame) or second (metres per second: the root channels at the rotations' size; see BENCHMARKS.md)."),
+    check_cleanup: Optional[bool] = typer.Option(None, "--check-cleanup/--no-check-cleanup", help="Quality checks sample with the foot cleanup, as `sample` does (default: without; see BENCHMARKS.md)."),
     foot_loss: Optional[float] = typer.Option(None, "--foot-loss", help="Weight of a foot-contact loss (the clip's planted joints kept still in the prediction, by forward kinematics; 0 = the paper's loss alone; see BENCHMARKS.md)."),
 ) -> None:
     """Train a denoiser on one clip."""
@@ -79,7 +80,7 @@ def train(
         raise SinMDMError(f"--check-every must be 0 (never) or more, got {check_every}")
     config = get_preset(preset).with_overrides(
         steps=steps, width=width, crop=crop, batch=batch, checkpoint_every=checkpoint_every, fps=fps, norm=norm,
-        velocity_unit=velocity_unit, foot_loss=foot_loss,
+        velocity_unit=velocity_unit, foot_loss=foot_loss, check_cleanup=check_cleanup,
         early_stop=False if steps else None, patience=patience,  # --steps forces a fixed budget: the watch still keeps the best
     )
     if check_every is not None:

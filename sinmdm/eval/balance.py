@@ -83,12 +83,16 @@ class CheckSettings:
     steps: int = 20  # respaced DDPM steps of the check's sampler
     hop: int | None = None  # None: half a window
     seed: int = 0
+    # Sample with the foot cleanup, as `sample` does: an early checkpoint that labels a foot in contact on
+    # every frame looks fine without it and loses coverage with it (BENCHMARKS.md, 2026-12-06)
+    cleanup: bool = False
 
 
 class ClipScorer:
     """Scores samples of a model against its clip: the paper's metrics, the plausibility
-    aggregate and the balance. Samples are drawn with fixed seeds, no foot cleanup and (unless
-    asked) no smoothing, so two scorings differ by the weights or the sampler settings only."""
+    aggregate and the balance. Samples are drawn with fixed seeds, no foot cleanup (unless the
+    settings ask for it) and no smoothing (unless asked), so two scorings differ by the weights or
+    the sampler settings only."""
 
     def __init__(self, reference: BVH, settings: CheckSettings = CheckSettings(), frames: int | None = None,
                  fps: float = 30.0, window: int = 64):
@@ -102,7 +106,7 @@ class ClipScorer:
     def check(self, model: MotionModel, steps: int | None = None, hop: int | None = None, smooth: float = 0.0) -> dict:
         began = time.perf_counter()
         options = SamplingOptions(count=self.settings.samples, seed=self.settings.seed, steps=steps or self.settings.steps,
-                                  hop=hop or self.settings.hop, cleanup=False, smooth=smooth)
+                                  hop=hop or self.settings.hop, cleanup=self.settings.cleanup, smooth=smooth)
         result = generate(model, self.frames, options)
         return {**self.score(result.clips), "check_seconds": round(time.perf_counter() - began, 2)}
 

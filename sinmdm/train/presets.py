@@ -32,6 +32,7 @@ class TrainConfig:
     patience: int = 3
     early_stop: bool = True
     fallback_norm: str | None = None  # a run that stops COPYING spends its remaining steps on this norm
+    check_cleanup: bool = False  # checks sample with the foot cleanup (what `sample` gives) instead of without
     foot_loss: float = 0.0  # weight of the foot-contact loss (train/foot_loss.py; 0 = the paper's loss alone)
     velocity_unit: str = "frame"  # the root velocity channels in metres per "frame" (paper) or "second" (runtime.features.model_scale)
 

@@ -15,6 +15,7 @@ import numpy as np
 import torch
 
 from .. import __version__
+from ..eval.balance import CheckSettings
 from ..runtime.atomic import check_writable_dir, file_sha256, write_text_atomic
 from ..runtime.bvh import BVH, read_bvh
 from ..runtime.errors import SinMDMError
@@ -410,8 +411,8 @@ def _second_stage(run: Run) -> TrainConfig | None:
 
 def _quality_watch(run: Run) -> QualityWatch:
     return QualityWatch(run.clip.bvh, run.clip.codec, run.diffusion.alphas_cumprod.numpy(), run.sampler.window,
-                        run.receptive_field, run.clip.start, source_fps=run.clip.info["source_fps"],
-                        velocity_unit=run.config.velocity_unit)
+                        run.receptive_field, run.clip.start, CheckSettings(cleanup=run.config.check_cleanup),
+                        source_fps=run.clip.info["source_fps"], velocity_unit=run.config.velocity_unit)
 
 
 def _check(run: Run, watch: QualityWatch, log, on_check) -> dict | None:
