@@ -65,13 +65,15 @@ def main() -> None:
                 continue
             clip = derived_clip(name, layout, args.work)
             run_dir = args.work / tag
+            config_path = run_dir / "config.json"
+            started = config_path.exists()
+            finished = started and json.loads(config_path.read_text()).get("finished")
             began = time.perf_counter()
-            finished = (run_dir / "config.json").exists() and json.loads((run_dir / "config.json").read_text()).get("finished")
             if not finished:  # a run trained earlier (by this script or by hand) is scored as it is
                 run("sinmdm", "train", str(clip), "--out", str(run_dir), "--preset", "cpu", "--seed", str(seed),
-                    *(["--resume"] if (run_dir / "config.json").exists() else []), *args.train_args)
-            config = json.loads((run_dir / "config.json").read_text())
-            train_wall = time.perf_counter() - began if not finished else config["elapsed_seconds"]
+                    *(["--resume"] if started else []), *args.train_args)
+            config = json.loads(config_path.read_text())
+            train_wall = config["elapsed_seconds"] if finished else time.perf_counter() - began
             path = export_trained_window(run_dir, config["window"])
             model = load_model(path)
             steps, protocol = model.default_steps, eval_protocol(name)

@@ -8,8 +8,10 @@ from pathlib import Path
 
 import pytest
 
-from sinmdm.eval.balance import SMOOTH_CANDIDATES, balance, in_band
+from sinmdm.eval.balance import SMOOTH_CANDIDATES, CheckSettings, ClipScorer, balance, in_band
 from sinmdm.eval.metrics import harmonic_mean
+from sinmdm.runtime import load_model, read_bvh
+from sinmdm.runtime.model import DEMO_MODEL
 from sinmdm.train.checkpoint import BEST, load_config, read_log
 from sinmdm.train.watch import COPYING, PEAKED, WatchState
 
@@ -75,10 +77,6 @@ def test_watch_stops_a_copying_run_short_of_the_band():
 def test_checks_can_score_what_sample_gives_with_the_foot_cleanup():
     """The scorer samples with the cleanup when its settings ask: the demo's feet slide
     25 cm/s without it (BENCHMARKS.md), and far less with it."""
-    from sinmdm.eval.balance import CheckSettings, ClipScorer
-    from sinmdm.runtime import load_model, read_bvh
-    from sinmdm.runtime.model import DEMO_MODEL
-
     model, clip = load_model(DEMO_MODEL), read_bvh(DEMO_CLIP)
     raw, cleaned = (ClipScorer(clip, CheckSettings(samples=2, steps=5, cleanup=c), fps=model.codec.fps,
                                window=model.trained_window).check(model) for c in (False, True))
