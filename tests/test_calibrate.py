@@ -11,6 +11,7 @@ import onnx
 import pytest
 
 from sinmdm.eval.balance import SMOOTH_CANDIDATES
+from sinmdm.export.calibrate import trained_check_cleanup
 from sinmdm.runtime import load_model, read_bvh
 from sinmdm.runtime.features import build_codec
 from sinmdm.runtime.model import DEMO_MODEL
@@ -53,9 +54,20 @@ def test_calibrate_writes_the_measured_defaults(demo_copy: Path):
     assert model.codec.contact_floors == build_codec(read_bvh(DEMO_CLIP)).contact_floors
     provenance = model.metadata["provenance"]
     assert provenance["sampling_scores"] == chosen["scores"] and provenance["calibrated"]["samples"] == 2
+    # the demo's run checked without the cleanup, so calibration measures without it too, and says so
+    assert chosen["cleanup"] is False and provenance["calibrated"]["cleanup"] is False
     stored = next(e.value for e in onnx.load(str(demo_copy)).metadata_props if e.key == "sinmdm")
     assert demo_copy.with_suffix(".json").read_text() == stored  # the sidecar is the same document
     assert _graph_bytes(demo_copy) == _graph_bytes(DEMO_MODEL)  # only the metadata changed
+
+
+def test_calibration_samples_as_the_run_checked():
+    model = load_model(DEMO_MODEL)
+    assert trained_check_cleanup(model) is False
+    model.metadata["provenance"] = {**model.metadata["provenance"], "train": {"check_cleanup": True}}
+    assert trained_check_cleanup(model) is True
+    del model.metadata["provenance"]  # a model without provenance: the checks' default
+    assert trained_check_cleanup(model) is False
 
 
 def test_calibrate_refuses_another_clip(demo_copy: Path):

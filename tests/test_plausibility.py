@@ -61,6 +61,18 @@ def test_a_sunken_figure_is_named(walk):
     assert "floor" in row["verdict"] and row["penetration_cm"] > 5
 
 
+def test_a_joint_the_clip_itself_puts_through_the_floor_is_judged_against_the_clip():
+    # the crab's clip dips its right claw's tip 4 cm under its floor: no flaw of a sample that does the same
+    crab = read_bvh(real_clip("Crabnew_Crab-dance-long.bvh"))
+    row = plausibility(crab, [crab])["samples"][0]
+    assert row["penetration_cm"] == 0 and row["penetration_share"] == 0 and row["verdict"] == "plausible"
+
+    def deeper(values):  # the whole crab 5 cm lower: its feet and its claw go deeper than the clip's
+        values[:, 1] -= 0.05  # the crab is in metres
+    row = plausibility(crab, [_edited(crab, deeper)])["samples"][0]
+    assert row["verdict"].startswith("sinks") and row["penetration_share"] > 0.5
+
+
 def test_a_dip_on_a_few_frames_is_named_with_a_share_above_zero(walk):
     def dip(values):  # the whole figure down 6 cm at frame 300 (60 fps), eased over a few frames: no jump
         values[:, 1] -= 6.0 * np.exp(-0.5 * ((np.arange(len(values)) - 300) / 2.0) ** 2)

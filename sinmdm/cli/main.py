@@ -264,6 +264,7 @@ def calibrate(
     models: list[Path] = typer.Argument(..., help="The model's .onnx windows."),
     clip: Path = typer.Option(..., "--clip", help="The clip the model learned (checked against its sha256)."),
     samples: int = typer.Option(6, "--samples", help="Motions per candidate setting (the training watch uses 6)."),
+    cleanup: Optional[bool] = typer.Option(None, "--cleanup/--no-cleanup", help="Sample with the foot cleanup (default: as the run's quality checks did, --check-cleanup)."),
     source_fps: Optional[float] = typer.Option(None, "--source-fps", help="Override the clip's frame rate."),
     threads: Optional[int] = typer.Option(None, "--threads", help="onnxruntime threads (default: all cores)."),
     as_json: bool = typer.Option(False, "--json", help="Print one JSON object."),
@@ -273,7 +274,7 @@ def calibrate(
     from ..eval.balance import BALANCE_TOLERANCE
     from ..export.calibrate import calibrate_model
 
-    chosen = calibrate_model(models, clip, samples=samples, source_fps=source_fps, threads=threads)
+    chosen = calibrate_model(models, clip, samples=samples, source_fps=source_fps, threads=threads, cleanup=cleanup)
     if as_json:
         print_json(chosen)
         return
@@ -284,7 +285,8 @@ def calibrate(
                       f"{t['check_seconds']:.1f}")
     console.print(table)
     console.print(f"sampling defaults: {chosen['steps']} steps, hop {chosen['hop']}{_smooth_words(chosen)} (the cheapest "
-                  f"setting within {BALANCE_TOLERANCE:g} of the first's balance), written into {', '.join(str(m) for m in models)}")
+                  f"setting within {BALANCE_TOLERANCE:g} of the first's balance, sampled "
+                  f"{'with' if chosen['cleanup'] else 'without'} the foot cleanup), written into {', '.join(str(m) for m in models)}")
 
 
 @app.command()

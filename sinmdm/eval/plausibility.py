@@ -141,6 +141,14 @@ def _ratio(a: float, b: float) -> float:
     return float(a / b) if b > 1e-12 else (1.0 if a <= 1e-12 else float("inf"))
 
 
+def joint_floors(ref: Track, floor: float, up: int) -> np.ndarray:
+    """(J,) the height below which each joint counts as in the floor: the clip's floor, or
+    lower where the clip itself puts that joint lower (the crab's clip dips a claw 4 cm
+    through its floor): what the clip does is not a flaw of a sample, and the clip against
+    itself stays neutral."""
+    return np.minimum(floor, ref.positions[..., up].min(axis=0))
+
+
 def score_sample(ref: Track, sample: Track, codec: MotionCodec, contacts: list[int], floor: float,
                  forward: np.ndarray | None) -> dict:
     up, size = codec.up_axis, codec.size
@@ -148,7 +156,7 @@ def score_sample(ref: Track, sample: Track, codec: MotionCodec, contacts: list[i
     floor_step = STEP_FLOOR * size
     ref_skate, ref_bob = planted_speeds_cm_s(ref, contacts, codec.contact_speed, up, floor, size)
     skate, bob = planted_speeds_cm_s(sample, contacts, codec.contact_speed, up, floor, size)
-    depth = floor - sample.positions[..., up]
+    depth = joint_floors(ref, floor, up) - sample.positions[..., up]
     below = depth > FLOOR_TOLERANCE
     scores = {
         "root_step_max_ratio": _ratio(steps.max(initial=0), max(ref_steps.max(initial=0), floor_step)),

@@ -31,21 +31,30 @@ def clip_resting_heights(model, reference) -> tuple[float, ...]:
     return resting_heights(positions, codec.fps, codec.contact_speed, codec.up_axis)
 
 
+def trained_check_cleanup(model) -> bool:
+    """Whether the run's quality checks sampled with the foot cleanup (`--check-cleanup`): calibration
+    measures the same way unless told otherwise, so its choice and the run's agree."""
+    return bool(((model.metadata.get("provenance") or {}).get("train") or {}).get("check_cleanup", False))
+
+
 def calibrate_model(paths: list[str | os.PathLike], clip: str | os.PathLike, samples: int = CheckSettings.samples,
-                    source_fps: float | None = None, threads: int | None = None) -> dict:
+                    source_fps: float | None = None, threads: int | None = None, cleanup: bool | None = None) -> dict:
     """Choose the model's sampling defaults (`choose_sampling`) with `samples` motions per
-    setting, write them into every window's metadata and sidecar, and return the choice."""
+    setting, sampled with the foot cleanup or not (`cleanup`; None: as the run's checks did),
+    write them into every window's metadata and sidecar, and return the choice."""
     if samples < 2:
         raise SinMDMError(f"--samples must be at least 2 (diversity compares samples), got {samples}")
     model = load_model(paths, threads=threads)
     reference = learned_clip(model, clip, "its defaults are measured against that clip", source_fps)
-    scorer = ClipScorer(reference, CheckSettings(samples=samples), fps=model.codec.fps, window=model.trained_window)
-    chosen = choose_sampling(model, scorer, model.trained_window)
+    cleanup = trained_check_cleanup(model) if cleanup is None else cleanup
+    scorer = ClipScorer(reference, CheckSettings(samples=samples, cleanup=cleanup), fps=model.codec.fps,
+                        window=model.trained_window)
+    chosen = {**choose_sampling(model, scorer, model.trained_window), "cleanup": cleanup}
     files = [Path(p) for p in paths]
     names = [name for path in files for name in (path.name, sidecar_path(path).name)]
     directory = one_folder(files, "calibrate")
     calibrated = {"date": datetime.now(timezone.utc).isoformat(timespec="seconds"), "samples": samples,
-                  "trials": chosen["trials"]}
+                  "cleanup": cleanup, "trials": chosen["trials"]}
 
     floors = None if model.codec.contact_floors is not None else clip_resting_heights(model, reference)
 
