@@ -88,12 +88,14 @@ def train_speed_table() -> str:
     data = results("train_speed")
     if data is None:
         return "(no training-speed results yet)\n"
-    lines = ["| clip | preset | features | frames per example | bf16 | s per iteration | projected full run |",
-             "|---|---|---|---|---|---|---|"]
+    lines = ["| clip | preset | features | frames per example | bf16 | compiled | first step s | s per iteration | projected run of the preset's steps |",
+             "|---|---|---|---|---|---|---|---|---|"]
     for r in data["rows"]:
-        steps = 3000 if r["preset"] == "cpu" else 60000
-        lines.append(f"| {r['clip']} | {r['preset']} | {r['features']} | {r['window']} | {r['bf16']} | {r['seconds_per_iteration']:.3f} "
-                     f"| {_duration(r['seconds_per_iteration'] * steps)} ({steps} it) |")
+        steps = r.get("steps") or (3000 if r["preset"] == "cpu" else 60000)
+        first = r.get("first_step_seconds")
+        lines.append(f"| {r['clip']} | {r['preset']} | {r['features']} | {r['window']} | {r['bf16']} | {r.get('compiled', False)} "
+                     f"| {'' if first is None else f'{first:.1f}'} | {r['seconds_per_iteration']:.3f} "
+                     f"| {_duration(r['full_run_hours'] * 3600 if 'steps' in r else r['seconds_per_iteration'] * steps)} ({steps} it) |")
     return "\n".join(lines) + "\n"
 
 

@@ -149,32 +149,57 @@ def joint_floors(ref: Track, floor: float, up: int) -> np.ndarray:
     return np.minimum(floor, ref.positions[..., up].min(axis=0))
 
 
-def score_sample(ref: Track, sample: Track, codec: MotionCodec, contacts: list[int], floor: float,
-                 forward: np.ndarray | None) -> dict:
+@dataclass(frozen=True)
+class Reference:
+    """The clip's own figures that every sample is scored against, computed once."""
+    codec: MotionCodec
+    contacts: list[int]  # indices into the tracks' joints
+    floor: float
+    joint_floors: np.ndarray  # (J,)
+    forward: np.ndarray | None
+    steps: np.ndarray  # (T-1,) root step per frame, metres
+    speeds: np.ndarray  # (T-1,) horizontal root speed, m/s
+    skating_cm_s: float
+    bob_cm_s: float
+    backward_share: float
+    backward_half_max: float
+    jerk: float
+
+
+def reference_figures(ref: Track, codec: MotionCodec, contacts: list[int]) -> Reference:
+    up = codec.up_axis
+    floor = float(np.percentile(ref.positions[..., up].min(axis=1), 2))
+    forward = forward_axis(ref, up)
+    skating, bob = planted_speeds_cm_s(ref, contacts, codec.contact_speed, up, floor, codec.size)
+    return Reference(codec, contacts, floor, joint_floors(ref, floor, up), forward, root_steps(ref), _speeds(ref, up),
+                     skating, bob, backward_share(ref, forward, up), most_backward_half(ref, forward, up), jerk(ref))
+
+
+def score_sample(ref: Reference, sample: Track) -> dict:
+    codec = ref.codec
     up, size = codec.up_axis, codec.size
-    ref_steps, steps = root_steps(ref), root_steps(sample)
+    steps = root_steps(sample)
     floor_step = STEP_FLOOR * size
-    ref_skate, ref_bob = planted_speeds_cm_s(ref, contacts, codec.contact_speed, up, floor, size)
-    skate, bob = planted_speeds_cm_s(sample, contacts, codec.contact_speed, up, floor, size)
-    depth = joint_floors(ref, floor, up) - sample.positions[..., up]
+    skate, bob = planted_speeds_cm_s(sample, ref.contacts, codec.contact_speed, up, ref.floor, size)
+    depth = ref.joint_floors - sample.positions[..., up]
     below = depth > FLOOR_TOLERANCE
     scores = {
-        "root_step_max_ratio": _ratio(steps.max(initial=0), max(ref_steps.max(initial=0), floor_step)),
+        "root_step_max_ratio": _ratio(steps.max(initial=0), max(ref.steps.max(initial=0), floor_step)),
         "root_step_p99_ratio": _ratio(np.percentile(steps, 99) if len(steps) else 0,
-                                      max(np.percentile(ref_steps, 99) if len(ref_steps) else 0, floor_step)),
+                                      max(np.percentile(ref.steps, 99) if len(ref.steps) else 0, floor_step)),
         "worst_step_frame": int(steps.argmax()) + 1 if len(steps) else 0,
         "worst_step_contrast": step_contrast(steps, int(steps.argmax())) if len(steps) else 1.0,
-        "speed_distance_m_s": wasserstein_1d(_speeds(sample, up), _speeds(ref, up)),
-        "backward_share": backward_share(sample, forward, up),
-        "clip_backward_share": backward_share(ref, forward, up),
-        "clip_backward_half_max": most_backward_half(ref, forward, up),
+        "speed_distance_m_s": wasserstein_1d(_speeds(sample, up), ref.speeds),
+        "backward_share": backward_share(sample, ref.forward, up),
+        "clip_backward_share": ref.backward_share,
+        "clip_backward_half_max": ref.backward_half_max,
         "foot_skating_cm_s": skate,
-        "clip_foot_skating_cm_s": ref_skate,
+        "clip_foot_skating_cm_s": ref.skating_cm_s,
         "foot_bob_cm_s": bob,
-        "clip_foot_bob_cm_s": ref_bob,
+        "clip_foot_bob_cm_s": ref.bob_cm_s,
         "penetration_cm": float(depth[below].mean() * 100) if below.any() else 0.0,
         "penetration_share": float(below.any(axis=1).mean()),
-        "jitter_ratio": _ratio(jerk(sample), jerk(ref)),
+        "jitter_ratio": _ratio(jerk(sample), ref.jerk),
     }
     scores["verdict"] = verdict(scores)
     return scores
@@ -214,10 +239,8 @@ def plausibility(reference: BVH, samples: list[BVH], units: str | float = "auto"
     wanted = [names[codec.trajectory_joint]] + [names[j] for j in codec.contact_joints] + [
         n for j, n in enumerate(names) if j != codec.trajectory_joint and j not in codec.contact_joints]
     contacts = list(range(1, 1 + len(codec.contact_joints)))
-    ref = track(reference, wanted, codec.scale)
-    floor = float(np.percentile(ref.positions[..., codec.up_axis].min(axis=1), 2))
-    forward = forward_axis(ref, codec.up_axis)
-    rows = [score_sample(ref, track(s, wanted, codec.scale), codec, contacts, floor, forward) for s in samples]
+    ref = reference_figures(track(reference, wanted, codec.scale), codec, contacts)
+    rows = [score_sample(ref, track(s, wanted, codec.scale)) for s in samples]
     aggregate = {
         "root_step_max_ratio": max(r["root_step_max_ratio"] for r in rows),
         **{k: float(np.mean([r[k] for r in rows])) for k in (

@@ -23,6 +23,7 @@ from ..runtime.features import MotionCodec, build_codec, model_scale
 from ..runtime.schedule import NUM_TIMESTEPS
 from .checkpoint import (BEST, CHECKSUMS, CONFIG, LOG, RUN_FORMAT, STAGE_PREFIX, load_best, load_config,
                          load_state, log_records, nonfinite_tensor, save_run)
+from .compiled import COMPILE_CHOICES, Forward, training_forward
 from .data import BatchSampler
 from .diffusion import GaussianDiffusion
 from .foot_loss import FootContactLoss
@@ -96,7 +97,8 @@ def load_clip(path: Path, fps: float, codec_options: dict) -> ClipData:
 class Run:
     """Model, EMA, optimiser, schedule and RNG states of one training run."""
 
-    def __init__(self, clip: ClipData, config: TrainConfig, seed: int, device: torch.device):
+    def __init__(self, clip: ClipData, config: TrainConfig, seed: int, device: torch.device,
+                 compile_mode: str = "auto"):
         self.clip, self.config, self.seed, self.device = clip, config, seed, device
         self.model_config = ModelConfig(
             features=clip.codec.width, width=config.width, norm=config.norm, dropout=config.dropout
@@ -129,6 +131,8 @@ class Run:
         self.checksums: dict[str, str] = {}  # sha256 of the weights files the run's config names
         self.saved_step = 0
         self.autocast = config.bf16 and bf16_supported(device)
+        self.compile_mode = compile_mode
+        self.forward: Forward | None = None  # chosen at the first step (compiled.py)
 
     # ------------------------------------------------------------- state
     def state(self) -> dict:
@@ -195,6 +199,7 @@ class Run:
             "seed": self.seed,
             "device": str(self.device),
             "bf16": self.autocast,
+            "compiled": None if self.forward is None else {"on": self.forward.compiled, "why": self.forward.why},
             "window": self.sampler.window,
             "receptive_field": self.receptive_field,
             "parameters": count_parameters(self.model),
@@ -216,9 +221,12 @@ class Run:
         batch = self.sampler().to(self.device)
         t = torch.randint(0, NUM_TIMESTEPS, (batch.shape[0],), generator=self.generator).to(self.device)
         noise = torch.randn(batch.shape, generator=self.generator).to(self.device)
+        if self.forward is None:
+            self.forward = training_forward(self.model, (torch.zeros_like(batch), t), self.autocast,
+                                            self.compile_mode, self.config.steps)
         self.model.train()
         with torch.autocast(device_type=self.device.type, dtype=torch.bfloat16, enabled=self.autocast):
-            loss = self.diffusion.training_loss(self.model, batch, t=t, noise=noise, extra=self.extra_loss)
+            loss = self.diffusion.training_loss(self.forward.module, batch, t=t, noise=noise, extra=self.extra_loss)
         self.optimizer.zero_grad(set_to_none=True)
         loss.backward()
         self.optimizer.step()
@@ -285,10 +293,14 @@ def train(
     codec_options: dict | None = None,
     on_progress: Callable[[int, int, float, float], None] | None = None,
     on_check: Callable[[int, dict, int], None] | None = None,
+    compile_mode: str = "auto",
 ) -> dict:
-    """Train (or resume) a run; returns the final run config."""
+    """Train (or resume) a run; returns the final run config. `compile_mode`: auto, on or
+    off (compiled.py)."""
     run_dir = Path(run_dir)
     codec_options = codec_options or {}
+    if compile_mode not in COMPILE_CHOICES:
+        raise SinMDMError(f"compile must be one of {', '.join(COMPILE_CHOICES)}, got '{compile_mode}'")
     if config.steps < 1:
         raise SinMDMError("--steps must be at least 1")
     has_run = (run_dir / CONFIG).exists()
@@ -297,7 +309,7 @@ def train(
     if resume and not has_run:
         raise SinMDMError(f"--resume: {run_dir} holds no run to continue (no {CONFIG})")
     clip = load_clip(Path(clip_path), config.fps, codec_options)
-    run = Run(clip, config, seed, resolve_device(device))
+    run = Run(clip, config, seed, resolve_device(device), compile_mode)
     if has_run:
         previous = load_config(run_dir)
         _compatible(previous, run)
@@ -376,7 +388,7 @@ def train(
     stage_done = (stage_dir / CONFIG).exists() and load_config(stage_dir)["finished"]
     stage = load_config(stage_dir) if stage_done else train(
         clip_path, stage_dir, second, seed=seed, device=device, resume=(stage_dir / CONFIG).exists(),
-        codec_options=codec_options, on_progress=stage_progress, on_check=stage_check)
+        codec_options=codec_options, on_progress=stage_progress, on_check=stage_check, compile_mode=compile_mode)
     first_best, stage_best = (run.watch.best or {}).get("balance", -1.0), (stage["watch"]["best"] or {}).get("balance", -1.0)
     result["stage"] = {"dir": stage_dir.name, "norm": second.norm, "steps": stage["step"], "from_step": offset,
                        "best": stage["watch"]["best"], "chosen": stage_best > first_best}
