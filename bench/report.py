@@ -292,7 +292,9 @@ def contact_floors_table(date: str = "2026-12-06") -> str:
     return "\n".join(lines) + "\n" if entries else "(no contact floor results yet)\n"
 
 
-TABLES = {"WATCHED_TABLE": watched_table, "WATCHED_1206_TABLE": lambda: watched_table("watched_2026-12-06", jitter=True), "WATCHED_CURVE_TABLE": watched_curve_table, "LAYOUTS_TABLE": layouts_table,
+TABLES = {"WATCHED_TABLE": watched_table, "WATCHED_1206_TABLE": lambda: watched_table("watched_2026-12-06", jitter=True),
+          "WATCHED_COMPILED_TABLE": lambda: watched_table("watched_compiled_2026-12-06", jitter=True),
+          "WATCHED_COMPILED_4000_TABLE": lambda: watched_table("watched_compiled_4000_2026-12-06", jitter=True), "WATCHED_CURVE_TABLE": watched_curve_table, "LAYOUTS_TABLE": layouts_table,
           "LAYOUTS_1205_TABLE": lambda: layouts_table("layouts_2026-12-05"),
           "LAYOUTS_1206_TABLE": lambda: layouts_table("layouts_2026-12-06"), "SMOOTHING_TABLE": smoothing_table, "CONTACT_FLOORS_TABLE": contact_floors_table,
           "LAYOUTS_FLOORS_TABLE": lambda: layouts_table("layouts_floors_2026-12-06"), "QUALITY_TABLE": quality_table, "SPEED_TABLE": speed_table, "TRAIN_SPEED_TABLE": train_speed_table,

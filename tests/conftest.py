@@ -4,6 +4,7 @@ and a tiny trained model (trained once per test session, a few seconds)."""
 from __future__ import annotations
 
 import os
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -69,6 +70,10 @@ def no_torch_env(tmp_path: Path) -> dict:
     (blocker / "torch" / "__init__.py").write_text("raise ImportError('torch is blocked in this test')\n")
     return {"PYTHONPATH": str(blocker)}
 
+
+# inductor builds its CPU kernels with the system's C++ compiler
+needs_compiler = pytest.mark.skipif(not (shutil.which("g++") or shutil.which("c++")),
+                                    reason="no C++ compiler: torch.compile cannot build kernels here")
 
 TINY_TRAIN_ARGS = ["--width", "32", "--batch", "4", "--crop", "48", "--checkpoint-every", "5", "--check-every", "0"]
 

@@ -12,7 +12,7 @@ from sinmdm.train.compiled import MIN_STEPS_TO_COMPILE, wants_compile
 from sinmdm.train.presets import preset
 from sinmdm.train.trainer import Run, load_clip
 
-from .conftest import DEMO_CLIP, TINY_TRAIN_ARGS, call_cli
+from .conftest import DEMO_CLIP, TINY_TRAIN_ARGS, call_cli, needs_compiler
 
 CPU = torch.device("cpu")
 
@@ -34,6 +34,7 @@ def test_auto_compiles_only_runs_long_enough_to_pay():
     assert wants_compile("on", 10, CPU)[0] and not wants_compile("off", 2800, CPU)[0]
 
 
+@needs_compiler
 def test_compiled_training_is_deterministic_and_matches_eager():
     compiled = tiny_run("on")
     losses, weights = weights_after(compiled, 3)

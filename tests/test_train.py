@@ -9,6 +9,7 @@ import sys
 import time
 from pathlib import Path
 
+import pytest
 import torch
 
 from sinmdm.runtime.bvh import BVH, read_bvh, write_bvh
@@ -17,7 +18,7 @@ from sinmdm.train.data import BatchSampler
 from sinmdm.train.presets import PRESETS
 from sinmdm.train.trainer import resolve_device
 
-from .conftest import DEMO_CLIP, TINY_TRAIN_ARGS, run_cli
+from .conftest import DEMO_CLIP, TINY_TRAIN_ARGS, needs_compiler, run_cli
 
 
 def train(*args: str, check: bool = True):
@@ -71,14 +72,15 @@ def test_frame_norm_option(tmp_path):
     assert not (tmp_path / "bad").exists()
 
 
-def test_kill_and_resume(tmp_path):
+@pytest.mark.parametrize("mode", [[], pytest.param(["--compile"], marks=needs_compiler)], ids=["eager", "compiled"])
+def test_kill_and_resume(tmp_path, mode):
     run_dir = tmp_path / "killed"
     exe = Path(sys.executable).parent / "sinmdm"
     process = subprocess.Popen(
-        [str(exe), "train", str(DEMO_CLIP), "--out", str(run_dir), "--steps", "150", *TINY_TRAIN_ARGS],
+        [str(exe), "train", str(DEMO_CLIP), "--out", str(run_dir), "--steps", "150", *TINY_TRAIN_ARGS, *mode],
         stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
     )
-    deadline = time.time() + 120
+    deadline = time.time() + 180
     while time.time() < deadline:
         try:
             if load_config(run_dir)["step"] >= 10:
@@ -91,9 +93,10 @@ def test_kill_and_resume(tmp_path):
     config = load_config(run_dir)  # the pair on disk is consistent after a SIGKILL
     step = config["step"]
     assert 10 <= step < 150 and step % 5 == 0
-    train(str(DEMO_CLIP), "--out", str(run_dir), "--steps", "150", "--resume")
+    train(str(DEMO_CLIP), "--out", str(run_dir), "--steps", "150", "--resume", *mode)
     straight = tmp_path / "straight"
-    train(str(DEMO_CLIP), "--out", str(straight), "--steps", "150")
+    train(str(DEMO_CLIP), "--out", str(straight), "--steps", "150", *mode)
+    assert load_config(straight)["compiled"]["on"] == bool(mode)
     assert_same_weights(run_dir, straight)
 
 

@@ -33,7 +33,7 @@ def _require_torch() -> None:
 def train(
     clip: Path = typer.Argument(..., help="The BVH clip to learn from."),
     out: Path = typer.Option(..., "--out", "-o", help="Run directory (checkpoints, config, log)."),
-    preset: str = typer.Option("cpu", "--preset", help="Recipe: cpu (the watched recipe: 6-34 min on 2 cores as measured) or paper (the authors', needs a GPU)."),
+    preset: str = typer.Option("cpu", "--preset", help="Recipe: cpu (the watched recipe: 3.5-19 min on 2 cores as measured) or paper (the authors', needs a GPU)."),
     steps: Optional[int] = typer.Option(None, "--steps", help="Total iterations to reach (default: the preset's; with --resume, the run's own). "
                                          "A finished run continues only when --steps raises its total."),
     device: str = typer.Option("auto", "--device", help="auto (CUDA, then MPS, then CPU), cpu, cuda, mps."),
@@ -181,6 +181,7 @@ def info(
         "loss": config["loss"],
         "elapsed_seconds": config["elapsed_seconds"],
         "device": config["device"],
+        "compiled": config.get("compiled"),
         "train": config["train"],
         "model": config["model"],
         "watch": config.get("watch"),
@@ -196,6 +197,8 @@ def info(
         value = summary[key]
         table.add_row(key.replace("_", " "), f"{value:,}" if isinstance(value, int) and not isinstance(value, bool) else str(value))
     table.add_row("clip", f"{config['clip']['name']} ({config['clip']['frames']} frames, sha256 {config['clip']['sha256'][:12]})")
+    if summary["compiled"]:
+        table.add_row("compiled", f"{'yes' if summary['compiled']['on'] else 'no'}: {summary['compiled']['why']}")
     console.print(table)
     watch = config.get("watch") or {}
     stage = config.get("stage")
