@@ -39,10 +39,11 @@ def wants_compile(choice: str, steps: int, device: torch.device) -> tuple[bool, 
 
 def training_forward(model: torch.nn.Module, example: tuple[torch.Tensor, torch.Tensor], autocast: bool,
                      choice: str, steps: int) -> Forward:
-    """`model` compiled, or `model` itself; `example` = (x_t, t) of a real batch. The
-    compiled graph is built here, forward and backward, so that a missing toolchain shows
-    before training starts; the RNG draws of that trial are undone and its gradients
-    dropped, so a compiled run draws the same batches and dropout seeds as an eager one."""
+    """`model` compiled, or `model` itself; `example` = (x_t, t) shaped like a real batch.
+    The compiled graph is built here, forward and backward, so that a missing toolchain
+    shows at the first step rather than in the middle of one; the trial's RNG draws are
+    undone and its gradients dropped, so it changes nothing the run then draws (the batches
+    are an eager run's; the dropout masks are the compiled kernels' own)."""
     device = example[0].device
     wanted, why = wants_compile(choice, steps, device)
     if not wanted:
