@@ -12,7 +12,7 @@ from sinmdm.train.compiled import MIN_STEPS_TO_COMPILE, wants_compile
 from sinmdm.train.presets import preset
 from sinmdm.train.trainer import Run, load_clip
 
-from .conftest import DEMO_CLIP, TINY_TRAIN_ARGS, call_cli, needs_compiler
+from .conftest import DEMO_CLIP, TINY_TRAIN_ARGS, call_cli, needs_compiler, run_cli
 
 CPU = torch.device("cpu")
 
@@ -64,3 +64,6 @@ def test_run_config_says_whether_it_compiled(tmp_path):
     call_cli("sinmdm", "train", str(DEMO_CLIP), "--out", str(tmp_path / "run"), "--steps", "2", *TINY_TRAIN_ARGS, check=True)
     config = json.loads((tmp_path / "run" / "config.json").read_text())
     assert config["compiled"] == {"on": False, "why": f"auto: 2 steps, under the {MIN_STEPS_TO_COMPILE} where compiling pays"}
+    info = run_cli("sinmdm", "info", str(tmp_path / "run"), check=True)
+    shown = info.stdout + info.stderr
+    assert "compiled" in shown and "no: auto: 2 steps" in shown
