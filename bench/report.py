@@ -91,11 +91,9 @@ def train_speed_table() -> str:
     lines = ["| clip | preset | features | frames per example | bf16 | compiled | first step s | s per iteration | projected run of the preset's steps |",
              "|---|---|---|---|---|---|---|---|---|"]
     for r in data["rows"]:
-        steps = r.get("steps") or (3000 if r["preset"] == "cpu" else 60000)
-        first = r.get("first_step_seconds")
-        lines.append(f"| {r['clip']} | {r['preset']} | {r['features']} | {r['window']} | {r['bf16']} | {r.get('compiled', False)} "
-                     f"| {'' if first is None else f'{first:.1f}'} | {r['seconds_per_iteration']:.3f} "
-                     f"| {_duration(r['full_run_hours'] * 3600 if 'steps' in r else r['seconds_per_iteration'] * steps)} ({steps} it) |")
+        lines.append(f"| {r['clip']} | {r['preset']} | {r['features']} | {r['window']} | {r['bf16']} | {r['compiled']} "
+                     f"| {r['first_step_seconds']:.1f} | {r['seconds_per_iteration']:.3f} "
+                     f"| {_duration(r['full_run_hours'] * 3600)} ({r['steps']} it) |")
     return "\n".join(lines) + "\n"
 
 

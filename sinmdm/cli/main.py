@@ -56,7 +56,7 @@ def train(
     norm: Optional[str] = typer.Option(None, "--norm", help="group (the paper's GroupNorm over the window) or frame (per-frame, a strictly local model; see BENCHMARKS.md)."),
     velocity_unit: Optional[str] = typer.Option(None, "--velocity-unit", help="frame (the paper: root velocity in metres per frame) or second (metres per second: the root channels at the rotations' size; see BENCHMARKS.md)."),
     check_cleanup: Optional[bool] = typer.Option(None, "--check-cleanup/--no-check-cleanup", help="Quality checks sample with the foot cleanup, as `sample` does (default: without; see BENCHMARKS.md)."),
-    compile: Optional[bool] = typer.Option(None, "--compile/--no-compile", help="Train through torch.compile (default: when the run has 600 steps or more on a CPU or CUDA device; about 1.5x faster after some 40 s of compiling; falls back to eager if compiling fails)."),
+    compile: Optional[bool] = typer.Option(None, "--compile/--no-compile", help="Train through torch.compile (default: when the run has 600 steps or more on a CPU or CUDA device; about 1.4x faster after some 45 s of compiling; falls back to eager if compiling fails)."),
     foot_loss: Optional[float] = typer.Option(None, "--foot-loss", help="Weight of a foot-contact loss (the clip's planted joints kept still in the prediction, by forward kinematics; 0 = the paper's loss alone; see BENCHMARKS.md)."),
 ) -> None:
     """Train a denoiser on one clip."""

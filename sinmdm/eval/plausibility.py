@@ -171,8 +171,10 @@ def reference_figures(ref: Track, codec: MotionCodec, contacts: list[int]) -> Re
     floor = float(np.percentile(ref.positions[..., up].min(axis=1), 2))
     forward = forward_axis(ref, up)
     skating, bob = planted_speeds_cm_s(ref, contacts, codec.contact_speed, up, floor, codec.size)
-    return Reference(codec, contacts, floor, joint_floors(ref, floor, up), forward, root_steps(ref), _speeds(ref, up),
-                     skating, bob, backward_share(ref, forward, up), most_backward_half(ref, forward, up), jerk(ref))
+    return Reference(codec=codec, contacts=contacts, floor=floor, joint_floors=joint_floors(ref, floor, up),
+                     forward=forward, steps=root_steps(ref), speeds=_speeds(ref, up), skating_cm_s=skating, bob_cm_s=bob,
+                     backward_share=backward_share(ref, forward, up),
+                     backward_half_max=most_backward_half(ref, forward, up), jerk=jerk(ref))
 
 
 def score_sample(ref: Reference, sample: Track) -> dict:

@@ -1,6 +1,6 @@
 """The training forward pass through `torch.compile` when it pays off, eager otherwise.
 
-Compiling costs about 40 s once per process (a C++ toolchain is needed on the CPU) and
+Compiling costs about 45 s once per process (a C++ toolchain is needed on the CPU) and
 saves about a third of every iteration of the `cpu` recipe (BENCHMARKS.md, "Training
 speed"), so `auto` compiles only runs long enough to win it back, on devices whose
 compiler backend is mature (CPU, CUDA). A run whose compilation fails trains eagerly,
@@ -13,8 +13,8 @@ from dataclasses import dataclass
 import torch
 
 COMPILE_CHOICES = ("auto", "on", "off")
-# iterations above which compiling pays: 40 s of compilation against 0.11 s saved per
-# iteration at 2 threads is about 360; the margin covers slower toolchains
+# iterations above which compiling pays: 46 s of compilation (empty cache) against 0.09-0.12 s
+# saved per iteration at 2 threads is 370-530; the margin covers slower toolchains
 MIN_STEPS_TO_COMPILE = 600
 
 
