@@ -61,7 +61,8 @@ def sample_and_score(model: Path, clip: Path, out: Path, steps: int, count: int,
             "sampling_seconds": round(seconds, 2), "eval_preset": preset,
             # the hop actually used: hop=None takes the model's measured hop, else half a window
             "hop": chosen.resolve(loaded, frames).hop or loaded.denoiser_for(frames).window // 2, "sampler": sampler, "options": options,
-            "plausibility": (scores.get("plausibility") or {}).get("aggregate")}
+            "plausibility": (scores.get("plausibility") or {}).get("aggregate"),
+            "verdicts": [r["verdict"] for r in (scores.get("plausibility") or {}).get("samples", [])]}
 
 
 def main() -> None:

@@ -209,6 +209,36 @@ def watched_table(name: str = "watched", jitter: bool = False) -> str:
     return "\n".join(lines) + "\n"
 
 
+def root_frame_table(date: str = "2026-12-06") -> str:
+    """The watched `cpu` recipe per clip in the world frame (the paper's features) and in the
+    heading frame (`--root-frame heading`), default sampler: the paper's metrics beside turning
+    and the plausibility verdicts (bench/watched.py, results `watched_{world,heading}_{date}`)."""
+    arms = [(frame, results(f"watched_{frame}_{date}")) for frame in ("world", "heading")]
+    if not any(entries for _, entries in arms):
+        return "(no root frame results yet)\n"
+    lines = header("clip", "root frame", "train wall", "coverage %", "global div", "local div",
+                   "turning deg/s (clip)", "turning distance deg/s (clip halves)", "largest root step (x clip)",
+                   "jitter (x clip)", "plausible", "verdicts")
+    tags = [e["tag"] for _, entries in arms for e in entries or []]
+    for tag in dict.fromkeys(tags):
+        for frame, entries in arms:
+            entry = next((e for e in entries or [] if e["tag"] == tag), None)
+            row = entry and next((r for r in entry["rows"] if r["variant"] == "default"), None)
+            if not row:
+                continue
+            a = row.get("plausibility") or {}
+            verdicts = Counter(v.split(" ")[0].rstrip(":") for v in row.get("verdicts") or [])
+            lines.append(
+                f"| {tag} | {frame} | {_duration(entry['train_wall_seconds'])} | {fmt(row['coverage'], 1)} "
+                f"| {fmt(row['global_diversity'])} | {fmt(row['local_diversity'])} "
+                f"| {fmt(a.get('turning_deg_s'), 1)} ({fmt(a.get('clip_turning_deg_s'), 1)}) "
+                f"| {fmt(a.get('turning_distance_deg_s'), 1)} ({fmt(a.get('clip_turning_halves_deg_s'), 1)}) "
+                f"| {fmt(a.get('root_step_max_ratio'))} | {fmt(a.get('jitter_ratio'), 1)} "
+                f"| {row['samples'] - a.get('implausible', 0)}/{row['samples']} "
+                f"| {', '.join(f'{k} {v}' for k, v in sorted(verdicts.items()))} |")
+    return "\n".join(lines) + "\n"
+
+
 def watched_curve_table() -> str:
     """The quality curve of every watched run: the scores at each check."""
     entries = results("watched")
@@ -292,6 +322,7 @@ def contact_floors_table(date: str = "2026-12-06") -> str:
 
 TABLES = {"WATCHED_TABLE": watched_table, "WATCHED_1206_TABLE": lambda: watched_table("watched_2026-12-06", jitter=True),
           "WATCHED_COMPILED_TABLE": lambda: watched_table("watched_compiled_2026-12-06", jitter=True),
+          "ROOT_FRAME_TABLE": root_frame_table,
           "WATCHED_COMPILED_4000_TABLE": lambda: watched_table("watched_compiled_4000_2026-12-06", jitter=True), "WATCHED_CURVE_TABLE": watched_curve_table, "LAYOUTS_TABLE": layouts_table,
           "LAYOUTS_1205_TABLE": lambda: layouts_table("layouts_2026-12-05"),
           "LAYOUTS_1206_TABLE": lambda: layouts_table("layouts_2026-12-06"), "SMOOTHING_TABLE": smoothing_table, "CONTACT_FLOORS_TABLE": contact_floors_table,

@@ -9,9 +9,12 @@ import numpy as np
 import pytest
 
 from sinmdm.eval.plausibility import plausibility
+from sinmdm.runtime.animation import Animation, animation_from_bvh, animation_to_bvh
 from sinmdm.runtime.bvh import BVH, read_bvh, write_bvh
+from sinmdm.runtime.rotations import axis_matrix
 
 from .conftest import real_clip, run_cli
+from .layouts import z_up
 
 
 @pytest.fixture(scope="module")
@@ -32,6 +35,7 @@ def test_a_clip_against_itself_is_neutral(walk):
     assert row["backward_share"] == row["clip_backward_share"] and row["verdict"] == "plausible"
     assert row["foot_skating_cm_s"] == row["clip_foot_skating_cm_s"]
     assert row["foot_bob_cm_s"] == row["clip_foot_bob_cm_s"]
+    assert row["turning_distance_deg_s"] == 0 and row["turning_deg_s"] == row["clip_turning_deg_s"]
 
 
 def test_a_teleport_is_named_with_its_frame(walk):
@@ -118,3 +122,32 @@ def test_a_recombination_of_the_clips_own_halves_is_not_called_backwards():
     assert row["backward_share"] > row["clip_backward_share"] + 0.05
     assert row["clip_backward_half_max"] > row["backward_share"] - 0.05
     assert "backwards" not in row["verdict"]
+
+
+def _straightened(clip: BVH) -> BVH:
+    """The clip with its root's turning taken out: the same gait walked along a straight line."""
+    animation = animation_from_bvh(clip)
+    facing = animation.rotations[:, 0] @ np.array([0.0, 0.0, 1.0])
+    heading = np.unwrap(np.arctan2(facing[:, 0], facing[:, 2]))
+    undo = axis_matrix(1, heading[0] - heading)  # (T, 3, 3) about Y
+    rotations = animation.rotations.copy()
+    rotations[:, 0] = undo @ rotations[:, 0]
+    translations = animation.translations.copy()
+    step = np.einsum("tab,tb->ta", undo[1:], np.diff(translations[:, 0], axis=0))
+    translations[1:, 0] = translations[0, 0] + np.cumsum(step, axis=0)
+    return animation_to_bvh(Animation(clip.skeleton, rotations, translations, animation.fps))
+
+
+def test_a_walk_that_stops_turning_is_named(walk):
+    """The walk turns a full circle to the left; the same gait on a straight line loses what the speed distance
+    and the paper's metrics cannot see: its path."""
+    row = plausibility(walk, [_straightened(walk)])["samples"][0]
+    assert row["clip_turning_deg_s"] == pytest.approx(30, abs=3) and abs(row["turning_deg_s"]) < 2
+    assert row["speed_distance_m_s"] < 0.02
+    assert row["verdict"].startswith("turns unlike the clip") and row["turning_distance_deg_s"] > 25
+
+
+def test_turning_is_the_same_on_a_z_up_copy(walk):
+    row = plausibility(z_up(walk), [z_up(walk)])["samples"][0]
+    assert row["clip_turning_deg_s"] == pytest.approx(plausibility(walk, [walk])["samples"][0]["clip_turning_deg_s"])
+    assert row["turning_distance_deg_s"] == 0 and row["verdict"] == "plausible"

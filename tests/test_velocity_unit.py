@@ -93,7 +93,7 @@ def test_the_vectors_hold_the_graphs_chain_and_the_scaled_back_features(per_seco
     np.testing.assert_array_equal(arrays["features"], features)
     margin = document["options"]["margin"]
     np.testing.assert_array_equal(arrays["features"],
-                                  (arrays["x_0"][:, margin : margin + 100] / model.feature_scale[:, None].astype(np.float32)).T)
+                                  (arrays["x_0"][:, margin : margin + 100] / model.graph_space.scale[:, None].astype(np.float32)).T)
     result = run_check(model_path, out, "--json")  # skips without node and onnxruntime-node
     assert result.returncode == 0, result.stdout + result.stderr
     report = json.loads(result.stdout)

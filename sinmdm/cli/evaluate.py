@@ -67,6 +67,8 @@ PLAUSIBILITY = (
     ("root_step_max_ratio", "largest root step / clip's", None),
     ("speed_distance_m_s", "root speed distance (m/s)", None),
     ("backward_share", "frames walking backwards", "clip_backward_share"),
+    ("turning_deg_s", "turning (deg/s, + left)", "clip_turning_deg_s"),
+    ("turning_distance_deg_s", "turning distance (deg/s)", None),
     ("foot_skating_cm_s", "foot skating (cm/s)", "clip_foot_skating_cm_s"),
     ("foot_bob_cm_s", "planted feet bobbing (cm/s)", "clip_foot_bob_cm_s"),
     ("penetration_cm", "floor penetration (cm)", None),
@@ -86,6 +88,8 @@ def _print_plausibility(console: Console, plausible: dict | None, samples: list[
         clip = f"{aggregate[clip_key]:.2f}" if clip_key else ("1.00" if key.endswith("_ratio") else "0.00")
         if key == "backward_share":
             clip += f" (halves up to {aggregate['clip_backward_half_max']:.2f})"
+        if key == "turning_distance_deg_s":
+            clip += f" (halves {aggregate['clip_turning_halves_deg_s']:.2f})"
         table.add_row(label, f"{aggregate[key]:.2f}", clip)
     console.print(table)
     for path, row in zip(samples, plausible["samples"]):

@@ -122,6 +122,7 @@ class ClipScorer:
             "root_step_max_ratio": round(float(aggregate.get("root_step_max_ratio", 0.0)), 3),
             "foot_skating_cm_s": round(float(aggregate.get("foot_skating_cm_s", 0.0)), 2),
             "jitter_ratio": round(float(aggregate.get("jitter_ratio", 0.0)), 3),
+            "turning_distance_deg_s": round(float(aggregate.get("turning_distance_deg_s", 0.0)), 2),
             "implausible": int(aggregate.get("implausible", 0)),
         }
         scores["balance"] = round(balance(scores["coverage"], scores["global_diversity"], scores["jitter_ratio"]), 4)

@@ -1,8 +1,9 @@
 """Plausibility: what an animator sees and the paper's metrics cannot (they read
 rotations and contact bits, not root motion). Per sample, against the clip, at
 30 fps in metres: root steps (teleports), speed distribution, walking against the
-facing direction, foot skating and bobbing (horizontal and vertical speed of planted
-feet), floor penetration and jitter, and a one-line verdict (bobbing is reported, not
+facing direction, turning (how fast the character's heading changes, against the
+clip's), foot skating and bobbing (horizontal and vertical speed of planted feet),
+floor penetration and jitter, and a one-line verdict (bobbing is reported, not
 judged: the cleanup holds ankles, not toes, at their height).
 
 Joints are the REFERENCE codec's (trajectory joint, contacts, up axis), found by
@@ -30,6 +31,13 @@ BACKWARD_POINTS = 0.05  # share of frames walking backwards beyond the most any 
 SKATING_RATIO, SKATING_SLACK_CM_S = 1.5, 2.0
 PENETRATION_CM = 2.0
 JITTER_RATIO = 2.0
+# Turning: the distance between the sample's and the clip's distributions of heading change
+# per second (over 1 s windows, signed: a clip that only turns left allows no right turns).
+# Beyond the floor, or beyond twice what the clip's halves differ by (an idle that turns
+# either way allows more), the path is not the clip's: a walk in a circle gone straight.
+TURN_WINDOW_S = 1.0
+TURN_FLOOR_DEG_S = 10.0
+TURN_HALVES_FACTOR = 2.0
 # A step this many times the median of its neighbours (3 frames each side) is a jump out of
 # the motion (a teleport); a fast step among fast steps is a motion faster than the clip's.
 JUMP_CONTRAST = 3.0
@@ -76,6 +84,27 @@ def forward_axis(t: Track, up: int) -> np.ndarray | None:
         return None
     local = np.einsum("tba,tb->ta", t.root_rotations[1:][moving], velocity[moving])
     return local.sum(axis=0) / max(np.linalg.norm(local.sum(axis=0)), 1e-12)
+
+
+def heading_axis(t: Track, up: int, forward: np.ndarray | None) -> np.ndarray:
+    """The trajectory joint's local axis whose yaw is its heading: the axis it travels along,
+    or, for a clip that stands, its most horizontal axis."""
+    if forward is not None:
+        return forward
+    world = np.einsum("tab,kb->tka", t.root_rotations, np.eye(3))
+    return np.eye(3)[int(np.argmin(np.abs(world[..., up]).mean(axis=0)))]
+
+
+def turning_rates(t: Track, axis: np.ndarray, up: int) -> np.ndarray:
+    """Heading change over each TURN_WINDOW_S window, in degrees per second (counter-clockwise
+    seen from above positive); empty for a motion shorter than a window."""
+    facing = np.einsum("tab,b->ta", t.root_rotations, axis)
+    first, second = (2, 0) if up == 1 else ((0, 1) if up == 2 else (1, 2))  # right-handed about `up`
+    heading = np.unwrap(np.arctan2(facing[:, second], facing[:, first]))
+    frames = int(round(TURN_WINDOW_S * FPS))
+    if len(heading) <= frames:
+        return np.zeros(0)
+    return np.degrees(heading[frames:] - heading[:-frames]) / TURN_WINDOW_S
 
 
 def backward_frames(t: Track, forward: np.ndarray | None, up: int) -> np.ndarray:
@@ -163,6 +192,9 @@ class Reference:
     bob_cm_s: float
     backward_share: float
     backward_half_max: float
+    heading_axis: np.ndarray
+    turning: np.ndarray  # (windows,) degrees per second
+    turning_halves_deg_s: float  # distance between the clip's own halves' turning
     jerk: float
 
 
@@ -171,10 +203,14 @@ def reference_figures(ref: Track, codec: MotionCodec, contacts: list[int]) -> Re
     floor = float(np.percentile(ref.positions[..., up].min(axis=1), 2))
     forward = forward_axis(ref, up)
     skating, bob = planted_speeds_cm_s(ref, contacts, codec.contact_speed, up, floor, codec.size)
+    axis = heading_axis(ref, up, forward)
+    turning = turning_rates(ref, axis, up)
+    half = len(turning) // 2
     return Reference(codec=codec, contacts=contacts, floor=floor, joint_floors=joint_floors(ref, floor, up),
                      forward=forward, steps=root_steps(ref), speeds=_speeds(ref, up), skating_cm_s=skating, bob_cm_s=bob,
                      backward_share=backward_share(ref, forward, up),
-                     backward_half_max=most_backward_half(ref, forward, up), jerk=jerk(ref))
+                     backward_half_max=most_backward_half(ref, forward, up), heading_axis=axis, turning=turning,
+                     turning_halves_deg_s=wasserstein_1d(turning[:half], turning[half:]), jerk=jerk(ref))
 
 
 def score_sample(ref: Reference, sample: Track) -> dict:
@@ -184,6 +220,7 @@ def score_sample(ref: Reference, sample: Track) -> dict:
     floor_step = STEP_FLOOR * size
     skate, bob = planted_speeds_cm_s(sample, ref.contacts, codec.contact_speed, up, ref.floor, size)
     depth = ref.joint_floors - sample.positions[..., up]
+    turning = turning_rates(sample, ref.heading_axis, up)
     below = depth > FLOOR_TOLERANCE
     scores = {
         "root_step_max_ratio": _ratio(steps.max(initial=0), max(ref.steps.max(initial=0), floor_step)),
@@ -195,6 +232,10 @@ def score_sample(ref: Reference, sample: Track) -> dict:
         "backward_share": backward_share(sample, ref.forward, up),
         "clip_backward_share": ref.backward_share,
         "clip_backward_half_max": ref.backward_half_max,
+        "turning_distance_deg_s": wasserstein_1d(turning, ref.turning),
+        "turning_deg_s": float(turning.mean()) if len(turning) else 0.0,
+        "clip_turning_deg_s": float(ref.turning.mean()) if len(ref.turning) else 0.0,
+        "clip_turning_halves_deg_s": ref.turning_halves_deg_s,
         "foot_skating_cm_s": skate,
         "clip_foot_skating_cm_s": ref.skating_cm_s,
         "foot_bob_cm_s": bob,
@@ -223,6 +264,10 @@ def verdict(s: dict) -> str:
     if s["backward_share"] > allowed + BACKWARD_POINTS:
         return (f"walks backwards {100 * s['backward_share']:.0f} % of frames (clip: {100 * s['clip_backward_share']:.0f} %, "
                 f"at most {100 * allowed:.0f} % in any half of it)")
+    turn_allowed = max(TURN_FLOOR_DEG_S, TURN_HALVES_FACTOR * s.get("clip_turning_halves_deg_s", 0.0))
+    if s.get("turning_distance_deg_s", 0.0) > turn_allowed:
+        return (f"turns unlike the clip: {round(s['turning_deg_s']):+d} deg/s on average (clip: {round(s['clip_turning_deg_s']):+d}), "
+                f"{s['turning_distance_deg_s']:.0f} deg/s apart")
     if s["penetration_cm"] > PENETRATION_CM:
         return f"sinks {s['penetration_cm']:.0f} cm into the floor on {_percent(s['penetration_share'])} of frames"
     if s["foot_skating_cm_s"] > SKATING_RATIO * s["clip_foot_skating_cm_s"] + SKATING_SLACK_CM_S:
@@ -246,10 +291,13 @@ def plausibility(reference: BVH, samples: list[BVH], units: str | float = "auto"
     aggregate = {
         "root_step_max_ratio": max(r["root_step_max_ratio"] for r in rows),
         **{k: float(np.mean([r[k] for r in rows])) for k in (
-            "root_step_p99_ratio", "speed_distance_m_s", "backward_share", "foot_skating_cm_s",
+            "root_step_p99_ratio", "speed_distance_m_s", "backward_share", "turning_distance_deg_s",
+            "turning_deg_s", "foot_skating_cm_s",
             "foot_bob_cm_s", "penetration_cm", "penetration_share", "jitter_ratio")},
         "clip_backward_share": rows[0]["clip_backward_share"],
         "clip_backward_half_max": rows[0]["clip_backward_half_max"],
+        "clip_turning_deg_s": rows[0]["clip_turning_deg_s"],
+        "clip_turning_halves_deg_s": rows[0]["clip_turning_halves_deg_s"],
         "clip_foot_skating_cm_s": rows[0]["clip_foot_skating_cm_s"],
         "clip_foot_bob_cm_s": rows[0]["clip_foot_bob_cm_s"],
         "implausible": sum(r["verdict"] != "plausible" for r in rows),

@@ -208,6 +208,7 @@ def _export_window(model: torch.nn.Module, config: dict, window: int, path: Path
         "model": config["model"],
         "model_id": weights_id(model),
         "velocity_unit": config["train"].get("velocity_unit", "frame"),  # runtime.features.model_scale
+        **({"heading_frame": config["heading_frame"]} if config.get("heading_frame") else {}),  # runtime.heading
         # the sampler settings measured with these weights (`sinmdm-run sample` uses them)
         "sampling_defaults": {k: config["sampling"][k] for k in ("steps", "hop", "smooth") if k in config["sampling"]}
         if config.get("sampling") else None,

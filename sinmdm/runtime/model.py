@@ -10,7 +10,8 @@ from pathlib import Path
 import numpy as np
 
 from .errors import ModelError, OptionError, SinMDMError
-from .features import MotionCodec, model_scale
+from .features import MotionCodec
+from .graph_space import GraphSpace, graph_space
 from .model_format import INPUT_NAMES, METADATA_KEY, OUTPUT_NAME, decode_metadata
 from .options import check_whole
 
@@ -62,6 +63,10 @@ class MotionModel:
         return self.codec.width
 
     @property
+    def graph_width(self) -> int:
+        return self.features + (self.metadata.get("heading_frame") is not None)
+
+    @property
     def velocity_unit(self) -> str:
         """What the graph's root velocity channels count in: "frame" (the paper: metres per
         frame) or "second" (metres per second, `sinmdm train --velocity-unit second`; see
@@ -69,9 +74,10 @@ class MotionModel:
         return self.metadata.get("velocity_unit", "frame")
 
     @property
-    def feature_scale(self) -> np.ndarray | None:
-        """(F,) factors from features to the graph's space, None where they are all 1."""
-        return model_scale(self.codec, self.velocity_unit)
+    def graph_space(self) -> GraphSpace:
+        """How the graph sees features: the root velocity's unit, and the heading frame when
+        the model was trained in it (`sinmdm train --root-frame heading`)."""
+        return graph_space(self.codec, self.metadata)
 
     @property
     def default_steps(self) -> int:
@@ -182,6 +188,16 @@ def _check_graph(denoiser: OnnxDenoiser, features: int, timesteps: int) -> None:
         raise ModelError(f"{path}: its graph returns its input unchanged: not a trained denoiser")
 
 
+def _graph_width(codec: MotionCodec, metadata: dict, path: Path) -> int:
+    """The channels the graph sees: the features, and the turn rate of a heading-frame model."""
+    if metadata.get("heading_frame") is None:
+        return codec.width
+    joint = None if codec.trajectory_joint is None else codec.skeleton.names[codec.trajectory_joint]
+    if not any(b.kind == "rotation" and b.joint == joint for b in codec.layout.blocks):
+        raise ModelError(f"{path}: its metadata names a heading frame, but its trajectory joint has no rotation features")
+    return codec.width + 1
+
+
 def load_model(paths: list[str | os.PathLike] | str | os.PathLike | None = None, threads: int | None = None,
                provider: str = "cpu") -> MotionModel:
     """Load one model from its `.onnx` windows (default: the bundled demo model), run by
@@ -206,7 +222,7 @@ def load_model(paths: list[str | os.PathLike] | str | os.PathLike | None = None,
         if window in denoisers:
             raise ModelError(f"{path} repeats window {window}")
         denoisers[window] = OnnxDenoiser(path, window, session)
-        _check_graph(denoisers[window], codec.width, len(first["alphas_cumprod"]))
+        _check_graph(denoisers[window], _graph_width(codec, first, path), len(first["alphas_cumprod"]))
     start = first.get("start_position") or [0.0, 0.0]
     return MotionModel(
         codec=codec,

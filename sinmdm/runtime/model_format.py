@@ -167,6 +167,8 @@ _SCHEMA: dict[str, Check] = {
     "sampling_defaults": _optional(_fields({}, {"steps": _integer(1, MAX_TIMESTEPS), "hop": _integer(1, MAX_WINDOW),
                                                   "smooth": _number(0.0, MAX_SMOOTH)})),
     "velocity_unit": _one_of("frame", "second"),
+    # the graph sees the trajectory joint from its own heading (runtime.heading)
+    "heading_frame": _optional(_fields({"forward": _list_of(_number(-1.0, 1.0), 3), "start": _number(-1e6, 1e6)})),
     # mixed precision (`sinmdm quantize`): int8 convolutions while t > int8_above_t
     "precision": _optional(_fields({"int8_above_t": _integer(0, MAX_TIMESTEPS)})),
 }

@@ -24,6 +24,7 @@ from typing import Callable
 import numpy as np
 
 from .errors import OptionError, SinMDMError
+from .graph_space import GraphSpace
 from .model import MotionModel
 from .options import DEFAULT_STEPS, EDGE_MARGIN, SAMPLERS, SamplingOptions  # noqa: F401 (re-exported)
 from .schedule import Schedule
@@ -277,16 +278,19 @@ def sample_features(
     (count, features, frames): one per sample."""
     if loop and guide is not None:
         raise SinMDMError("loop cannot be combined with guides (applications): sample a loop without one")
+    space = model.graph_space  # features <-> the graph's space
+    if space.heading is not None and (guide is not None or loop):
+        raise SinMDMError(f"this model sees motion from the character's heading (trained with --root-frame heading): "
+                          f"{'loops' if loop else 'applications'} need a model trained with --root-frame world")
     options, margin, denoise, schedule = plan_sampling(model, frames, options, loop)
     length = denoise.frames
     streams = [np.random.default_rng(options.seed + i) for i in range(options.count)]
-    x = draw(streams, (model.features, length), STATE_DTYPE)
-    scale = model.feature_scale  # features <-> the graph's space (None: the same)
+    x = draw(streams, (model.graph_width, length), STATE_DTYPE)
     compose = harmonize = None
     if guide is not None:
         reference = np.asarray(guide.reference, dtype=np.float64)
-        if scale is not None:
-            reference = reference * scale[:, None]
+        if space.scale is not None:
+            reference = reference * space.scale[:, None]
         reference = _as_state(fit_guide(reference, length, margin))
         keep = _as_state(fit_guide(guide.keep, length, margin))
         region = _as_state(fit_guide(guide.harmonize, length, margin))
@@ -296,11 +300,13 @@ def sample_features(
             stop_t = HARMONIZE_STOP * len(model.alphas_cumprod)
             harmonize = ilvr(schedule, reference, region, guide.factor, stop_t, streams)
     x = sample_loop(denoise, schedule, x, streams, options.sampler, options.eta, compose, harmonize, progress)
-    return to_features(x[:, :, margin : margin + frames], scale)
+    return to_features(x[:, :, margin : margin + frames], space)
 
 
-def to_features(x: np.ndarray, scale: np.ndarray | None) -> np.ndarray:
-    """(N, F, T) in the graph's space -> (N, T, F) float32 features."""
-    if scale is not None:
-        x = x / scale[:, None].astype(x.dtype)
+def to_features(x: np.ndarray, space: GraphSpace) -> np.ndarray:
+    """(N, G, T) in the graph's space -> (N, T, F) float32 features."""
+    if space.heading is not None:
+        return space.to_features(x.transpose(0, 2, 1)).astype(np.float32)
+    if space.scale is not None:  # float32 division of the float32 state, as docs/runtime.md specifies for ports
+        x = x / space.scale[:, None].astype(x.dtype)
     return x.transpose(0, 2, 1).astype(np.float32)

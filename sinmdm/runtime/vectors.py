@@ -19,7 +19,7 @@ import numpy as np
 from .. import __version__
 from .animation import global_positions
 from .atomic import OutputSet, file_sha256
-from .errors import OptionError
+from .errors import OptionError, SinMDMError
 from .model import MotionModel
 from .options import SamplingOptions
 from .rig import skeleton_extent
@@ -81,7 +81,7 @@ class Plan:
     schedule: Schedule
 
     def bytes(self, model: MotionModel) -> int:
-        per_step = 3 * model.features * self.denoise.frames  # x_t, x0_hat, noise
+        per_step = 3 * model.graph_width * self.denoise.frames  # x_t, x0_hat, noise
         decoded = self.frames * (2 * model.features + model.codec.skeleton.num_joints * 15)  # features, smoothed, joints
         return 4 * (per_step * len(self.schedule.timesteps) + 2 * model.features * self.denoise.frames + decoded)
 
@@ -103,20 +103,22 @@ class Recording:
 
 def record(model: MotionModel, planned: Plan) -> Recording:
     """Run the planned sample through the real loop, its chain kept, and decode it."""
+    if model.graph_space.heading is not None:  # the other runtimes' ports know the paper's features only
+        raise SinMDMError("golden vectors are written for models trained with --root-frame world only")
     options, margin, frames, schedule = planned.options, planned.margin, planned.frames, planned.schedule
     length = planned.denoise.frames
     stream = RecordingStream(np.random.default_rng(options.seed))
-    x_T = draw([stream], (model.features, length), STATE_DTYPE)
+    x_T = draw([stream], (model.graph_width, length), STATE_DTYPE)
     recorder = RecordingDenoiser(planned.denoise)
     x_0 = sample_loop(recorder, schedule, x_T.copy(), [stream], options.sampler, options.eta)
-    features = to_features(x_0[:, :, margin : margin + frames], model.feature_scale)[0]
+    features = to_features(x_0[:, :, margin : margin + frames], model.graph_space)[0]
 
-    size = model.features * length
+    size = model.graph_width * length
     normals = stream.normals()
     steps = len(schedule.timesteps)
     if normals.size != size * steps:
         raise AssertionError(f"the sampler drew {normals.size} normals, expected {size * steps}")
-    noise = normals[size:].reshape(steps - 1, model.features, length).astype(STATE_DTYPE)
+    noise = normals[size:].reshape(steps - 1, model.graph_width, length).astype(STATE_DTYPE)
     smoothed = smooth_frames(features[None], options.smooth, wrap=planned.loop)[0]
     animation = model.codec.decode(smoothed, model.start_position)
     arrays = {

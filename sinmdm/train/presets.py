@@ -35,6 +35,7 @@ class TrainConfig:
     check_cleanup: bool = False  # checks sample with the foot cleanup (what `sample` gives) instead of without
     foot_loss: float = 0.0  # weight of the foot-contact loss (train/foot_loss.py; 0 = the paper's loss alone)
     velocity_unit: str = "frame"  # the root velocity channels in metres per "frame" (paper) or "second" (runtime.features.model_scale)
+    root_frame: str = "world"  # the trajectory joint seen in the "world" (paper) or from its "heading" (runtime.heading)
 
     def to_dict(self) -> dict:
         data = asdict(self)

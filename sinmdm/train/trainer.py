@@ -19,7 +19,9 @@ from ..eval.balance import CheckSettings
 from ..runtime.atomic import check_writable_dir, file_sha256, write_text_atomic
 from ..runtime.bvh import BVH, read_bvh
 from ..runtime.errors import SinMDMError
-from ..runtime.features import MotionCodec, build_codec, model_scale
+from ..runtime.features import MotionCodec, build_codec
+from ..runtime.graph_space import graph_space
+from ..runtime.heading import ROOT_FRAMES, clip_heading_frame
 from ..runtime.schedule import NUM_TIMESTEPS
 from .checkpoint import (BEST, CHECKSUMS, CONFIG, LOG, RUN_FORMAT, STAGE_PREFIX, load_best, load_config,
                          load_state, log_records, nonfinite_tensor, save_run)
@@ -77,6 +79,22 @@ class ClipData:
     bvh: BVH
 
 
+def graph_metadata(clip: ClipData, config: TrainConfig) -> dict:
+    """How the model's graph sees the clip's features (runtime.graph_space), as its metadata says it."""
+    if config.root_frame not in ROOT_FRAMES:
+        raise SinMDMError(f"unknown root frame {config.root_frame!r}: use {' or '.join(ROOT_FRAMES)}")
+    heading = None
+    if config.root_frame == "heading":
+        codec = clip.codec
+        joint = None if codec.trajectory_joint is None else codec.skeleton.names[codec.trajectory_joint]
+        if not any(b.kind == "rotation" and b.joint == joint for b in codec.layout.blocks):
+            raise SinMDMError("--root-frame heading needs a trajectory joint with rotation channels; this clip has none")
+        if config.foot_loss > 0:
+            raise SinMDMError("--foot-loss works on world-frame features: it cannot be combined with --root-frame heading")
+        heading = clip_heading_frame(codec, clip.features).to_dict()
+    return {"velocity_unit": config.velocity_unit, "heading_frame": heading}
+
+
 def load_clip(path: Path, fps: float, codec_options: dict) -> ClipData:
     bvh = read_bvh(path)
     codec = build_codec(bvh, fps=fps, **codec_options)
@@ -100,8 +118,10 @@ class Run:
     def __init__(self, clip: ClipData, config: TrainConfig, seed: int, device: torch.device,
                  compile_mode: str = "auto"):
         self.clip, self.config, self.seed, self.device = clip, config, seed, device
+        self.graph_metadata = graph_metadata(clip, config)  # what the exported model will say of its graph
+        space = graph_space(clip.codec, self.graph_metadata)  # features -> the model's space
         self.model_config = ModelConfig(
-            features=clip.codec.width, width=config.width, norm=config.norm, dropout=config.dropout
+            features=space.width, width=config.width, norm=config.norm, dropout=config.dropout
         )
         self.receptive_field = receptive_field(self.model_config)
         if clip.features.shape[0] < self.receptive_field:
@@ -116,11 +136,9 @@ class Run:
         self.scheduler = torch.optim.lr_scheduler.LambdaLR(self.optimizer, learning_rate_factor(config))
         self.diffusion = GaussianDiffusion()
         self.generator = torch.Generator().manual_seed(seed)
-        scale = model_scale(clip.codec, config.velocity_unit)  # features -> the model's space
-        clip_tensor = torch.from_numpy(np.ascontiguousarray(
-            clip.features.T if scale is None else clip.features.T * scale[:, None], dtype=np.float32))
+        clip_tensor = torch.from_numpy(np.ascontiguousarray(space.to_graph(clip.features).T, dtype=np.float32))
         self.sampler = BatchSampler(clip_tensor, config, self.generator)
-        foot = FootContactLoss(clip.codec, scale) if config.foot_loss > 0 else None
+        foot = FootContactLoss(clip.codec, space.scale) if config.foot_loss > 0 else None
         self.extra_loss = None if foot is None else (lambda prediction, x0: config.foot_loss * foot(prediction, x0))
         self.step = 0
         self.watch = WatchState()
@@ -194,6 +212,7 @@ class Run:
             "clip": self.clip.info,
             "codec": self.clip.codec.to_dict(),
             "start_position": [float(v) for v in self.clip.start],
+            **({"heading_frame": self.graph_metadata["heading_frame"]} if self.graph_metadata["heading_frame"] else {}),
             "model": self.model_config.to_dict(),
             "train": self.config.to_dict(),
             "seed": self.seed,
@@ -424,7 +443,7 @@ def _second_stage(run: Run) -> TrainConfig | None:
 def _quality_watch(run: Run) -> QualityWatch:
     return QualityWatch(run.clip.bvh, run.clip.codec, run.diffusion.alphas_cumprod.numpy(), run.sampler.window,
                         run.receptive_field, run.clip.start, CheckSettings(cleanup=run.config.check_cleanup),
-                        source_fps=run.clip.info["source_fps"], velocity_unit=run.config.velocity_unit)
+                        source_fps=run.clip.info["source_fps"], graph_metadata=run.graph_metadata)
 
 
 def _check(run: Run, watch: QualityWatch, log, on_check) -> dict | None:

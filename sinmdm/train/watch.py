@@ -47,13 +47,13 @@ class QualityWatch:
 
     def __init__(self, reference: BVH, codec, alphas_cumprod: np.ndarray, window: int, receptive_field: int,
                  start: np.ndarray, settings: CheckSettings = CheckSettings(), frames: int | None = None,
-                 source_fps: float | None = None, velocity_unit: str = "frame"):
+                 source_fps: float | None = None, graph_metadata: dict | None = None):
         if source_fps:  # the clip's real frame rate (--source-fps) for every metric
             reference = BVH(reference.skeleton, 1.0 / source_fps, reference.values, reference.path)
         self.scorer = ClipScorer(reference, settings, frames, codec.fps, window)
         self.codec, self.alphas, self.window, self.receptive_field, self.start = (
             codec, np.asarray(alphas_cumprod, dtype=np.float64), window, receptive_field, start)
-        self.metadata = {"velocity_unit": velocity_unit}  # what the exported model will say of its graph
+        self.metadata = graph_metadata or {"velocity_unit": "frame"}  # what the exported model will say of its graph
 
     @property
     def frames(self) -> int:

@@ -1,0 +1,111 @@
+"""The heading frame: an optional graph space in which the trajectory joint's rotation
+and velocity are seen from the character's own heading, plus one channel for the
+heading's rate of turn.
+
+The paper's features hold the trajectory joint's rotation and velocity in the world
+(its parent's frame). A clip that walks a circle then shows the network a different
+heading in every window, and what repeats (turning left at 30 deg/s) is nowhere a
+local pattern: measured on the Mixamo walk, samples of one window turn at 2 deg/s
+against the clip's 30, and long ones spin where windows of different headings meet
+(BENCHMARKS.md, "Turning"). In the heading frame the yaw about the up axis is taken
+out of the rotation and the velocity and kept as its per-second rate, so a turn is a
+pattern like any other; it is integrated back, from the clip's start heading, when
+features leave the graph's space.
+
+Angles are about the trajectory joint's parent-frame up axis (`codec.height_axis`),
+positive by the right-hand rule; the heading is the yaw of the trajectory joint's
+`forward` axis (the local axis the clip travels along, or its most horizontal one).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .rotations import axis_matrix, matrix_to_6d, sixd_to_matrix
+
+ROOT_FRAMES = ("world", "heading")
+MOVING_SPEED = 0.1  # m/s: below this the root stands and its direction of travel means nothing
+
+
+@dataclass(frozen=True)
+class HeadingFrame:
+    rotation: tuple[int, ...]  # the six feature channels of the trajectory joint's 6D rotation
+    velocity: tuple[int, int]  # its two horizontal velocity channels (d<h1>, d<h2>)
+    horizontal: tuple[int, int]  # the parent-frame axes those velocities are along
+    up: int  # the parent-frame up axis
+    forward: np.ndarray  # (3,) the trajectory joint's local axis whose yaw is the heading
+    fps: float
+    start: float = 0.0  # radians: the clip's heading at its first frame
+
+    @classmethod
+    def of(cls, codec, forward, start: float = 0.0) -> "HeadingFrame":
+        layout = codec.layout
+        joint = codec.skeleton.names[codec.trajectory_joint]
+        rotation = next(b for b in layout.blocks if b.kind == "rotation" and b.joint == joint)
+        dx, _, dz = layout.indices(("root",))
+        return cls(tuple(range(rotation.start, rotation.stop)), (int(dx), int(dz)), codec.horizontal_axes,
+                   codec.height_axis, np.asarray(forward, dtype=np.float64), float(codec.fps), float(start))
+
+    def to_dict(self) -> dict:
+        return {"forward": [float(v) for v in self.forward], "start": self.start}
+
+    def headings(self, features: np.ndarray) -> np.ndarray:
+        """(..., T) radians, unwrapped along T: the yaw of the forward axis."""
+        facing = sixd_to_matrix(features[..., list(self.rotation)].reshape(features.shape[:-1] + (6,))) @ self.forward
+        u, v = (self.up + 1) % 3, (self.up + 2) % 3  # axis_matrix(up, a) turns u towards v by a
+        return np.unwrap(np.arctan2(facing[..., v], facing[..., u]), axis=-1)
+
+    def _turned(self, features: np.ndarray, angles: np.ndarray) -> np.ndarray:
+        """Features with the trajectory joint's rotation and velocity turned by `angles` (..., T)."""
+        turn = axis_matrix(self.up, angles)
+        out = features.astype(np.float64, copy=True)
+        rotation = sixd_to_matrix(out[..., list(self.rotation)])
+        out[..., list(self.rotation)] = matrix_to_6d(turn @ rotation)
+        velocity = np.zeros(features.shape[:-1] + (3,))
+        velocity[..., list(self.horizontal)] = out[..., list(self.velocity)]
+        out[..., list(self.velocity)] = np.einsum("...ab,...b->...a", turn, velocity)[..., list(self.horizontal)]
+        return out
+
+    def to_graph(self, features: np.ndarray) -> np.ndarray:
+        """(..., T, F) features -> (..., T, F + 1): heading taken out, its rate (rad/s) appended
+        (frame 0 repeats frame 1's, as the velocities do)."""
+        heading = self.headings(features)
+        rate = np.diff(heading, axis=-1) * self.fps
+        rate = np.concatenate([rate[..., :1] if rate.shape[-1] else np.zeros(rate.shape[:-1] + (1,)), rate], axis=-1)
+        return np.concatenate([self._turned(features, -heading), rate[..., None]], axis=-1)
+
+    def to_features(self, x: np.ndarray, start: float | None = None) -> np.ndarray:
+        """(..., T, F + 1) -> (..., T, F): the heading integrated from `start` (default the
+        clip's) over the rates of frames 1..T-1 and put back."""
+        rate = x[..., -1].astype(np.float64) / self.fps
+        first = self.start if start is None else start
+        heading = first + np.concatenate([np.zeros(rate.shape[:-1] + (1,)), np.cumsum(rate[..., 1:], axis=-1)], axis=-1)
+        return self._turned(x[..., :-1], heading)
+
+
+def travel_axis(rotations: np.ndarray, velocity: np.ndarray, up: int) -> np.ndarray:
+    """(3,) the local axis of a joint ((T, 3, 3) rotations in its parent's frame, (T, 3)
+    velocities in m/s) along which it travels; for a joint that stands, its most horizontal axis."""
+    velocity = velocity.copy()
+    velocity[:, up] = 0.0
+    moving = np.linalg.norm(velocity, axis=-1) > MOVING_SPEED
+    if moving.mean() >= 0.2:
+        local = np.einsum("tba,tb->a", rotations[moving], velocity[moving])
+        if np.linalg.norm(local) > 1e-9:
+            return local / np.linalg.norm(local)
+    world = np.einsum("tab,kb->tka", rotations, np.eye(3))
+    return np.eye(3)[int(np.argmin(np.abs(world[..., up]).mean(axis=0)))]
+
+
+def clip_heading_frame(codec, features: np.ndarray) -> HeadingFrame:
+    """The heading frame of a clip's (T, F) features: its travel axis and start heading."""
+    joint = codec.skeleton.names[codec.trajectory_joint]
+    block = next(b for b in codec.layout.blocks if b.kind == "rotation" and b.joint == joint)
+    rotations = sixd_to_matrix(np.asarray(features, dtype=np.float64)[:, block.start : block.stop])
+    dx, _, dz = codec.layout.indices(("root",))
+    velocity = np.zeros((len(features), 3))
+    velocity[:, list(codec.horizontal_axes)] = np.asarray(features, dtype=np.float64)[:, [dx, dz]] * codec.fps
+    frame = HeadingFrame.of(codec, travel_axis(rotations, velocity, codec.height_axis))
+    return HeadingFrame.of(codec, frame.forward, float(frame.headings(np.asarray(features, dtype=np.float64))[0]))

@@ -1,0 +1,114 @@
+"""The heading frame (`--root-frame heading`): the trajectory joint seen from the
+character's heading, plus its rate of turn. Going there and back is exact on every
+layout; a model trained in it samples motion, and what it cannot do yet is refused
+before any work with one line."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from sinmdm.runtime import load_model
+from sinmdm.runtime.bvh import read_bvh
+from sinmdm.runtime.features import build_codec
+from sinmdm.runtime.generate import generate
+from sinmdm.runtime.graph_space import graph_space
+from sinmdm.runtime.heading import clip_heading_frame
+from sinmdm.runtime.options import SamplingOptions
+
+from .conftest import TINY_TRAIN_ARGS, call_cli, real_clip
+from .layouts import with_static_root, z_up
+
+LAYOUTS = {"as shared": lambda b: b, "z-up": z_up, "static root": with_static_root}
+
+
+@pytest.mark.parametrize("layout", LAYOUTS)
+@pytest.mark.parametrize("name", ["Joe_Walk-In-Circle.bvh", "Crabnew_Crab-dance-long.bvh", "Elephant_idle1.bvh"])
+def test_there_and_back_is_exact(name, layout):
+    clip = LAYOUTS[layout](read_bvh(real_clip(name)))
+    codec = build_codec(clip, fps=30)
+    features = codec.encode(clip).astype(np.float64)
+    frame = clip_heading_frame(codec, features)
+    graph = frame.to_graph(features)
+    assert graph.shape == (len(features), codec.width + 1)
+    np.testing.assert_allclose(frame.to_features(graph), features, atol=1e-6)
+
+
+@pytest.mark.parametrize("layout", LAYOUTS)
+def test_the_walk_in_a_circle_is_one_turn_rate_and_one_forward_speed(layout):
+    """What varies with the heading in the world (rotation, velocity direction) is constant in
+    the heading frame: the same pattern in every window, which a narrow model can learn."""
+    clip = LAYOUTS[layout](read_bvh(real_clip("Joe_Walk-In-Circle.bvh")))
+    codec = build_codec(clip, fps=30)
+    features = codec.encode(clip).astype(np.float64)
+    frame = clip_heading_frame(codec, features)
+    graph = frame.to_graph(features)
+    turn = np.degrees(graph[:, -1])
+    assert np.mean(turn) == pytest.approx(29, abs=2)  # deg/s, to the left (counter-clockwise from above)
+    velocity = graph[:, list(frame.velocity)] * codec.fps
+    world = features[:, list(frame.velocity)] * codec.fps
+    assert velocity.std(axis=0).max() < 0.5 * world.std(axis=0).max()  # the world velocity goes round, this does not
+
+
+def test_graph_space_scales_after_turning():
+    clip = read_bvh(real_clip("Joe_Walk-In-Circle.bvh"))
+    codec = build_codec(clip, fps=30)
+    features = codec.encode(clip).astype(np.float64)
+    frame = clip_heading_frame(codec, features).to_dict()
+    space = graph_space(codec, {"velocity_unit": "second", "heading_frame": frame})
+    graph = space.to_graph(features)
+    assert graph.shape[-1] == space.width == codec.width + 1
+    np.testing.assert_allclose(space.to_features(graph), features, atol=1e-6)
+
+
+@pytest.fixture(scope="module")
+def heading_model(tmp_path_factory):
+    """A tiny model of the walk trained in the heading frame, exported."""
+    work = tmp_path_factory.mktemp("heading")
+    clip = real_clip("Joe_Walk-In-Circle.bvh")
+    call_cli("sinmdm", "train", str(clip), "--out", str(work / "run"), "--steps", "6", *TINY_TRAIN_ARGS,
+             "--root-frame", "heading", check=True)
+    call_cli("sinmdm", "export", str(work / "run"), "--out", str(work / "walk.onnx"), check=True)
+    return work / "walk_w48.onnx", clip, work
+
+
+def test_a_heading_model_says_so_and_samples_the_same_bytes_twice(heading_model):
+    path, clip, work = heading_model
+    model = load_model(path)
+    assert model.graph_width == model.features + 1 and model.graph_space.heading is not None
+    config = json.loads((work / "run" / "config.json").read_text())
+    assert config["train"]["root_frame"] == "heading" and len(config["heading_frame"]["forward"]) == 3
+    info = call_cli("sinmdm", "info", str(work / "run"), check=True)
+    assert "root frame" in info.stdout + info.stderr
+    a = generate(model, 120, SamplingOptions(count=2, seed=3, steps=5))
+    b = generate(model, 120, SamplingOptions(count=2, seed=3, steps=5))
+    assert np.array_equal(a.features, b.features) and np.isfinite(a.features).all()
+    one = generate(model, 120, SamplingOptions(count=1, seed=4, steps=5))  # the second sample of the crowd, alone
+    assert np.array_equal(one.features[0], a.features[1])
+
+
+@pytest.mark.parametrize("args", [
+    ["sample", "--loop", "--seconds", "3"],
+    ["inbetween", "--ref", "CLIP"],
+    ["vectors"],
+])
+def test_what_a_heading_model_cannot_do_yet_is_refused_in_one_line(heading_model, args, tmp_path):
+    path, clip, _ = heading_model
+    args = [str(clip) if a == "CLIP" else a for a in args]
+    result = call_cli("sinmdm-run", args[0], str(path), *args[1:], "--out", str(tmp_path / "out"))
+    assert result.returncode == 2, result.stdout + result.stderr
+    message = (result.stdout + result.stderr).strip()
+    assert "--root-frame" in message and len(message.splitlines()) == 1 and "Traceback" not in message
+    assert not (tmp_path / "out").exists() or not any((tmp_path / "out").iterdir())
+
+
+def test_bad_root_frame_options_are_refused_before_training(tmp_path):
+    clip = str(real_clip("Joe_Walk-In-Circle.bvh"))
+    bad = call_cli("sinmdm", "train", clip, "--out", str(tmp_path / "a"), "--root-frame", "body", "--steps", "2")
+    assert bad.returncode == 2 and "--root-frame" in bad.stdout + bad.stderr
+    foot = call_cli("sinmdm", "train", clip, "--out", str(tmp_path / "b"), "--root-frame", "heading", "--foot-loss", "1",
+                    "--steps", "2", *TINY_TRAIN_ARGS)
+    assert foot.returncode == 2 and "--foot-loss" in foot.stdout + foot.stderr
+    assert not (tmp_path / "b" / "checkpoint.pt").exists()
