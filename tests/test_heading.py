@@ -1,7 +1,7 @@
 """The heading frame (`--root-frame heading`): the trajectory joint seen from the
 character's heading, plus its rate of turn. Going there and back is exact on every
 layout; a model trained in it samples motion, and what it cannot do yet is refused
-before any work with one line."""
+before any work with one line; the applications keep what they keep."""
 
 from __future__ import annotations
 
@@ -11,8 +11,10 @@ import numpy as np
 import pytest
 
 from sinmdm.runtime import load_model
+from sinmdm.runtime.animation import animation_from_bvh, global_positions
+from sinmdm.runtime.applications import INBETWEEN_RAMP
 from sinmdm.runtime.bvh import read_bvh
-from sinmdm.runtime.features import build_codec
+from sinmdm.runtime.features import build_codec, resample_animation
 from sinmdm.runtime.generate import generate
 from sinmdm.runtime.graph_space import graph_space
 from sinmdm.runtime.heading import clip_heading_frame
@@ -91,17 +93,53 @@ def test_a_heading_model_says_so_and_samples_the_same_bytes_twice(heading_model)
 
 @pytest.mark.parametrize("args", [
     ["sample", "--loop", "--seconds", "3"],
-    ["inbetween", "--ref", "CLIP"],
     ["vectors"],
+    ["control", "--ref", "TRAJECTORY", "--trajectory", "--source-fps", "30"],  # a path of another skeleton: no heading
 ])
-def test_what_a_heading_model_cannot_do_yet_is_refused_in_one_line(heading_model, args, tmp_path):
+def test_what_a_heading_model_cannot_do_is_refused_in_one_line(heading_model, args, tmp_path):
     path, clip, _ = heading_model
-    args = [str(clip) if a == "CLIP" else a for a in args]
+    args = [str(real_clip("Joe_traj-example.bvh")) if a == "TRAJECTORY" else a for a in args]
     result = call_cli("sinmdm-run", args[0], str(path), *args[1:], "--out", str(tmp_path / "out"))
     assert result.returncode == 2, result.stdout + result.stderr
     message = (result.stdout + result.stderr).strip()
     assert "--root-frame" in message and len(message.splitlines()) == 1 and "Traceback" not in message
     assert not (tmp_path / "out").exists() or not any((tmp_path / "out").iterdir())
+
+
+def _hips(path) -> tuple[np.ndarray, np.ndarray]:
+    animation = resample_animation(animation_from_bvh(read_bvh(path)), 30)
+    return animation.rotations[:, 0], global_positions(animation)[:, 0]
+
+
+def test_in_betweening_keeps_the_reference_s_start_and_end_exactly(heading_model, tmp_path):
+    """The heading is integrated from the reference's on the first kept frame and what the
+    generated gap misses is spread over it, so the kept end faces and stands where the clip's does."""
+    path, clip, _ = heading_model
+    call_cli("sinmdm-run", "inbetween", str(path), "--ref", str(clip), "--out", str(tmp_path), "--steps", "5", check=True)
+    rotations, positions = _hips(next(tmp_path.glob("*.bvh")))
+    want_rotations, want_positions = _hips(clip)
+    quarter = len(rotations) // 4 - INBETWEEN_RAMP
+    for kept in (slice(0, quarter), slice(len(rotations) - quarter, None)):
+        np.testing.assert_allclose(rotations[kept], want_rotations[kept], atol=1e-3)
+        np.testing.assert_allclose(positions[kept], want_positions[kept], atol=0.05)  # file units (cm)
+
+
+def test_trajectory_control_walks_the_reference_s_path(heading_model, tmp_path):
+    path, clip, _ = heading_model
+    call_cli("sinmdm-run", "control", str(path), "--ref", str(clip), "--trajectory", "--out", str(tmp_path), "--steps", "5",
+             check=True)
+    rotations, positions = _hips(next(tmp_path.glob("*.bvh")))
+    want_rotations, want_positions = _hips(clip)
+    np.testing.assert_allclose(positions[:, [0, 2]], want_positions[:, [0, 2]], atol=0.05)
+    np.testing.assert_allclose(rotations, want_rotations, atol=1e-3)
+
+
+@pytest.mark.parametrize("app", ["expand", "keyframes", "harmonize"])
+def test_the_other_applications_run_on_a_heading_model(heading_model, app, tmp_path):
+    path, clip, _ = heading_model
+    call_cli("sinmdm-run", app, str(path), "--ref", str(clip), "--out", str(tmp_path), "--steps", "5", check=True)
+    rotations, positions = _hips(next(tmp_path.glob("*.bvh")))
+    assert np.isfinite(positions).all() and len(rotations) > 300
 
 
 def test_bad_root_frame_options_are_refused_before_training(tmp_path):

@@ -23,6 +23,13 @@ class GraphSpace:
     def width(self) -> int:
         return self.feature_width + (self.heading is not None)
 
+    @property
+    def graph_scale(self) -> np.ndarray | None:
+        """(width,) the scale over the graph's channels (the turn rate is never scaled)."""
+        if self.scale is None or self.heading is None:
+            return self.scale
+        return np.concatenate([self.scale, [1.0]])
+
     def to_graph(self, features: np.ndarray) -> np.ndarray:
         """(..., T, F) features -> (..., T, width) float64."""
         x = np.asarray(features, dtype=np.float64)
@@ -33,13 +40,13 @@ class GraphSpace:
             x[..., : self.feature_width] *= self.scale
         return x
 
-    def to_features(self, x: np.ndarray) -> np.ndarray:
-        """(..., T, width) -> (..., T, F) float64."""
+    def to_features(self, x: np.ndarray, starts: np.ndarray | None = None) -> np.ndarray:
+        """(..., T, width) -> (..., T, F) float64; `starts`: the heading frame's start headings."""
         x = np.asarray(x, dtype=np.float64)
         if self.scale is not None:
             x = x.copy()
             x[..., : self.feature_width] /= self.scale
-        return x if self.heading is None else self.heading.to_features(x)
+        return x if self.heading is None else self.heading.to_features(x, starts)
 
 
 def graph_space(codec: MotionCodec, metadata: dict) -> GraphSpace:

@@ -23,6 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .errors import SinMDMError
 from .rotations import axis_matrix, matrix_to_6d, sixd_to_matrix
 
 ROOT_FRAMES = ("world", "heading")
@@ -76,11 +77,11 @@ class HeadingFrame:
         rate = np.concatenate([rate[..., :1] if rate.shape[-1] else np.zeros(rate.shape[:-1] + (1,)), rate], axis=-1)
         return np.concatenate([self._turned(features, -heading), rate[..., None]], axis=-1)
 
-    def to_features(self, x: np.ndarray, start: float | None = None) -> np.ndarray:
+    def to_features(self, x: np.ndarray, start: float | np.ndarray | None = None) -> np.ndarray:
         """(..., T, F + 1) -> (..., T, F): the heading integrated from `start` (default the
-        clip's) over the rates of frames 1..T-1 and put back."""
+        clip's; or one per motion, shape (...,)) over the rates of frames 1..T-1 and put back."""
         rate = x[..., -1].astype(np.float64) / self.fps
-        first = self.start if start is None else start
+        first = np.asarray(self.start if start is None else start, dtype=np.float64)[..., None]
         heading = first + np.concatenate([np.zeros(rate.shape[:-1] + (1,)), np.cumsum(rate[..., 1:], axis=-1)], axis=-1)
         return self._turned(x[..., :-1], heading)
 
@@ -109,3 +110,86 @@ def clip_heading_frame(codec, features: np.ndarray) -> HeadingFrame:
     velocity[:, list(codec.horizontal_axes)] = np.asarray(features, dtype=np.float64)[:, [dx, dz]] * codec.fps
     frame = HeadingFrame.of(codec, travel_axis(rotations, velocity, codec.height_axis))
     return HeadingFrame.of(codec, frame.forward, float(frame.headings(np.asarray(features, dtype=np.float64))[0]))
+
+
+# --------------------------------------------------------------------------- guides
+KNOWN = 0.999  # a keep weight at or above this keeps the channel exactly (the applications' ramps are below)
+
+
+def _wrapped(angle: np.ndarray) -> np.ndarray:
+    return (angle + np.pi) % (2 * np.pi) - np.pi
+
+
+class GuidedHeading:
+    """An application's guide in the heading frame. A channel of the graph is kept where
+    what it is made of is kept: the turned rotation where the trajectory joint's rotation
+    is, the turned velocity where that and the world velocity are, the rate of turn where
+    the rotation is kept on this frame and the one before. After sampling, `starts` turns
+    each sample so the heading meets the reference's on the first kept frame, and spreads
+    what it misses on each later kept frame over the frames before it (the heading's
+    `land_on_reference`)."""
+
+    def __init__(self, frame: HeadingFrame, reference: np.ndarray, keep: np.ndarray | None, region: np.ndarray | None):
+        self.frame = frame
+        features = np.moveaxis(np.asarray(reference, dtype=np.float64), -2, -1)  # (..., T, F)
+        self.headings = frame.headings(features)  # (..., T): only wrapped differences of these count
+        self.faces = np.abs(features[..., 0, list(frame.rotation)]).sum(axis=-1) > 0  # (...,) a pose at frame 0
+        self.reference = np.nan_to_num(np.moveaxis(frame.to_graph(features), -1, -2))  # (..., G, T)
+        self.keep = None if keep is None else self._channels(np.asarray(keep, dtype=np.float64))
+        self.region = None if region is None else self._channels(np.asarray(region, dtype=np.float64))
+        rotation = (np.zeros(features.shape[-2]) if keep is None
+                    else np.asarray(keep, dtype=np.float64)[..., list(frame.rotation), :].min(axis=-2))
+        self.known = rotation >= KNOWN  # (..., T) frames whose heading the reference fixes
+
+    def _channels(self, mask: np.ndarray) -> np.ndarray:
+        """(..., F, T) feature mask -> (..., F + 1, T) graph mask."""
+        f = self.frame
+        rotation = mask[..., list(f.rotation), :].min(axis=-2)
+        out = np.concatenate([mask, np.zeros(mask.shape[:-2] + (1, mask.shape[-1]))], axis=-2)
+        for c in f.velocity:
+            out[..., c, :] = np.minimum(mask[..., c, :], rotation)
+        before = np.concatenate([rotation[..., :1] * 0.0, rotation[..., :-1]], axis=-1)
+        out[..., -1, :] = np.minimum(rotation, before)
+        return out
+
+    def check(self, keep: np.ndarray | None) -> None:
+        """A velocity kept without the rotation it is turned by cannot be kept in this frame."""
+        if keep is None:
+            return
+        f = self.frame
+        keep = np.asarray(keep, dtype=np.float64)
+        rotation = keep[..., list(f.rotation), :].min(axis=-2)
+        if any((keep[..., c, :] > rotation + 1e-9).any() for c in f.velocity):
+            raise SinMDMError("this model sees motion from the character's heading (trained with --root-frame heading): "
+                              "a path without the reference's rotations cannot guide it; give a reference on the model's "
+                              "skeleton, or use a model trained with --root-frame world")
+
+    def starts(self, x: np.ndarray) -> np.ndarray:
+        """x (N, G, T) sampled in the graph's space (the guide's frames), its rates changed in
+        place where headings are landed; returns (N,) start headings."""
+        rate = x[:, -1, :].astype(np.float64) / self.frame.fps
+        count, frames = rate.shape
+
+        def fitted(a: np.ndarray) -> np.ndarray:
+            a = a[..., :frames]
+            pad = np.zeros(a.shape[:-1] + (frames - a.shape[-1],), dtype=a.dtype)
+            return np.broadcast_to(np.concatenate([a, pad], axis=-1), (count, frames))
+
+        known, reference = fitted(self.known), fitted(self.headings)
+        starts = np.full(count, self.frame.start)
+        for n in range(count):
+            kept = np.flatnonzero(known[n])
+            if not len(kept):
+                if np.broadcast_to(self.faces, (count,))[n]:
+                    starts[n] = reference[n, 0]  # facing as the reference starts (a harmonized clip)
+                continue
+            heading = np.concatenate([[0.0], np.cumsum(rate[n, 1:])])
+            starts[n] = reference[n, kept[0]] - heading[kept[0]]
+            for previous, k in zip(kept[:-1], kept[1:]):
+                if k == previous + 1:
+                    continue
+                miss = _wrapped(reference[n, k] - (starts[n] + heading[k]))
+                rate[n, previous + 1 : k + 1] += miss / (k - previous)
+                heading = np.concatenate([[0.0], np.cumsum(rate[n, 1:])])
+        x[:, -1, :] = (rate * self.frame.fps).astype(x.dtype)
+        return starts

@@ -25,6 +25,7 @@ import numpy as np
 
 from .errors import OptionError, SinMDMError
 from .graph_space import GraphSpace
+from .heading import GuidedHeading
 from .model import MotionModel
 from .options import DEFAULT_STEPS, EDGE_MARGIN, SAMPLERS, SamplingOptions  # noqa: F401 (re-exported)
 from .schedule import Schedule
@@ -279,9 +280,14 @@ def sample_features(
     if loop and guide is not None:
         raise SinMDMError("loop cannot be combined with guides (applications): sample a loop without one")
     space = model.graph_space  # features <-> the graph's space
-    if space.heading is not None and (guide is not None or loop):
-        raise SinMDMError(f"this model sees motion from the character's heading (trained with --root-frame heading): "
-                          f"{'loops' if loop else 'applications'} need a model trained with --root-frame world")
+    if space.heading is not None and loop:
+        raise SinMDMError("this model sees motion from the character's heading (trained with --root-frame heading): "
+                          "loops need a model trained with --root-frame world")
+    heading = None
+    if guide is not None and space.heading is not None:
+        heading = GuidedHeading(space.heading, guide.reference, guide.keep, guide.harmonize)
+        heading.check(guide.keep)
+        guide = Guide(heading.reference, heading.keep, heading.region, guide.factor)
     options, margin, denoise, schedule = plan_sampling(model, frames, options, loop)
     length = denoise.frames
     streams = [np.random.default_rng(options.seed + i) for i in range(options.count)]
@@ -289,8 +295,8 @@ def sample_features(
     compose = harmonize = None
     if guide is not None:
         reference = np.asarray(guide.reference, dtype=np.float64)
-        if space.scale is not None:
-            reference = reference * space.scale[:, None]
+        if space.graph_scale is not None:
+            reference = reference * space.graph_scale[:, None]
         reference = _as_state(fit_guide(reference, length, margin))
         keep = _as_state(fit_guide(guide.keep, length, margin))
         region = _as_state(fit_guide(guide.harmonize, length, margin))
@@ -300,13 +306,15 @@ def sample_features(
             stop_t = HARMONIZE_STOP * len(model.alphas_cumprod)
             harmonize = ilvr(schedule, reference, region, guide.factor, stop_t, streams)
     x = sample_loop(denoise, schedule, x, streams, options.sampler, options.eta, compose, harmonize, progress)
-    return to_features(x[:, :, margin : margin + frames], space)
+    x = x[:, :, margin : margin + frames]
+    return to_features(x, space, None if heading is None else heading.starts(x))
 
 
-def to_features(x: np.ndarray, space: GraphSpace) -> np.ndarray:
-    """(N, G, T) in the graph's space -> (N, T, F) float32 features."""
+def to_features(x: np.ndarray, space: GraphSpace, starts: np.ndarray | None = None) -> np.ndarray:
+    """(N, G, T) in the graph's space -> (N, T, F) float32 features; `starts`: (N,) start
+    headings of a heading-frame model (default its clip's)."""
     if space.heading is not None:
-        return space.to_features(x.transpose(0, 2, 1)).astype(np.float32)
+        return space.to_features(x.transpose(0, 2, 1), starts).astype(np.float32)
     if space.scale is not None:  # float32 division of the float32 state, as docs/runtime.md specifies for ports
         x = x / space.scale[:, None].astype(x.dtype)
     return x.transpose(0, 2, 1).astype(np.float32)
