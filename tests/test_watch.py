@@ -30,6 +30,16 @@ def test_balance_ranks_a_shaking_model_below_a_steady_one():
     assert not in_band({"coverage": 97.07, "global_diversity": 1.5957, "jitter_ratio": 5.205})
 
 
+def test_balance_ranks_a_model_that_loses_the_clip_s_turning_below_one_that_keeps_it():
+    # logged checks of the heading-frame walk (2026-12-06): the frame-norm stage's first check
+    # (samples turn 15.9 deg/s away from the clip's) against the GroupNorm stage's best (8.1)
+    astray, turning = balance(100.0, 1.7271, 0.442, 15.86), balance(100.0, 1.2962, 2.276, 8.11)
+    assert astray < turning
+    assert balance(100.0, 1.2962, 2.276, 8.11) == balance(100.0, 1.2962, 2.276)  # within the floor: no effect
+    assert not in_band({"coverage": 100.0, "global_diversity": 1.73, "turning_distance_deg_s": 15.86,
+                        "turning_allowed_deg_s": 10.0})
+
+
 def test_balance_ranks_the_paper_above_copying_and_drifting():
     assert balance(*PAPER_ROW) > balance(*DRIFTING_ROW) and balance(*PAPER_ROW) > balance(*COPYING_ROW)
     # The table (coverage, global, local): the paper's harmonic mean (maxima = the

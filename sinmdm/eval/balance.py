@@ -2,13 +2,19 @@
 chosen by it. Numpy only: the training watch scores torch weights with it, `sinmdm
 calibrate` an exported model.
 
-Balance = min(coverage / 95, global diversity / 1.3, 3 / jitter ratio): every term must hold, so a
+Balance = min(coverage / 95, global diversity / 1.3, 3 / jitter ratio, allowed turning / turning
+distance): every term must hold, so a
 copying model (coverage 100, diversity 1.0: 0.77) and a drifting one (coverage 75,
 diversity 1.9: 0.79) both lose to the paper's own row (98.1 / 1.55: 1.03). Unlike the
 paper's harmonic mean, extra diversity cannot buy back lost coverage, and neither can
 buy back samples that shake (the walk's frame-norm check at 97 % / 1.60 with 5.2x the
 clip's jerk: 0.58, below its GroupNorm check at 91 % / 1.17 / 2.5x: 0.90). A clip too
-static to reach 1.3 is scored by its diversity once coverage holds. Samples that teleport
+static to reach 1.3 is scored by its diversity once coverage holds. The turning term is the
+plausibility verdict's (its floor, or twice what the clip's halves differ by, over the distance
+between the samples' and the clip's heading change per second): a walk in a circle whose samples
+go straight or spin is not in balance, whatever its coverage (the heading-frame walk's frame-norm
+check at 100 % / 1.73 turned 15.9 deg/s away from the clip: 0.63, below its GroupNorm check at
+100 % / 1.30 / 8.1 deg/s: 1.00; BENCHMARKS.md, "Turning"). Samples that teleport
 (the root jumps more than 1.5x the clip's largest step) are never kept.
 """
 
@@ -24,7 +30,7 @@ from ..runtime.model import MotionModel
 from ..runtime.options import SamplingOptions
 from . import metrics
 from .motion_features import MIXAMO24_JOINTS, eval_features, protocol_for, resolve_joints
-from .plausibility import TELEPORT_RATIO, plausibility
+from .plausibility import TELEPORT_RATIO, TURN_FLOOR_DEG_S, plausibility, turning_allowed
 
 COVERAGE_BAND = 95.0  # % : below this the model drifts from the clip
 DIVERSITY_BAND = 1.3  # global diversity: below this the model copies
@@ -51,17 +57,21 @@ BALANCE_TOLERANCE = 0.02
 SMOOTH_CANDIDATES = (1.0,)
 
 
-def balance(coverage: float, global_diversity: float, jitter_ratio: float | None = None) -> float:
-    """The weakest of the band ratios, jitter's included when it is known."""
+def balance(coverage: float, global_diversity: float, jitter_ratio: float | None = None,
+            turning_distance: float | None = None, turning_allowed: float = TURN_FLOOR_DEG_S) -> float:
+    """The weakest of the band ratios, jitter's and turning's included when they are known."""
     ratios = [coverage / COVERAGE_BAND, global_diversity / DIVERSITY_BAND]
     if jitter_ratio:
         ratios.append(JITTER_LIMIT / jitter_ratio)
+    if turning_distance:
+        ratios.append(turning_allowed / turning_distance)
     return float(min(ratios))
 
 
 def in_band(scores: dict) -> bool:
     return (scores["coverage"] >= COVERAGE_BAND and scores["global_diversity"] >= DIVERSITY_BAND
-            and scores.get("jitter_ratio", 0.0) <= JITTER_LIMIT)
+            and scores.get("jitter_ratio", 0.0) <= JITTER_LIMIT
+            and scores.get("turning_distance_deg_s", 0.0) <= scores.get("turning_allowed_deg_s", TURN_FLOOR_DEG_S))
 
 
 def keepable(scores: dict) -> bool:
@@ -123,9 +133,11 @@ class ClipScorer:
             "foot_skating_cm_s": round(float(aggregate.get("foot_skating_cm_s", 0.0)), 2),
             "jitter_ratio": round(float(aggregate.get("jitter_ratio", 0.0)), 3),
             "turning_distance_deg_s": round(float(aggregate.get("turning_distance_deg_s", 0.0)), 2),
+            "turning_allowed_deg_s": round(turning_allowed(aggregate.get("clip_turning_halves_deg_s", 0.0)), 2),
             "implausible": int(aggregate.get("implausible", 0)),
         }
-        scores["balance"] = round(balance(scores["coverage"], scores["global_diversity"], scores["jitter_ratio"]), 4)
+        scores["balance"] = round(balance(scores["coverage"], scores["global_diversity"], scores["jitter_ratio"],
+                                          scores["turning_distance_deg_s"], scores["turning_allowed_deg_s"]), 4)
         return scores
 
 
@@ -151,4 +163,4 @@ def choose_sampling(model: MotionModel, scorer: ClipScorer, window: int) -> dict
             break
         chosen = smoothed
     return {"steps": chosen["steps"], "hop": chosen["hop"], "smooth": chosen["smooth"], "scores": {k: chosen[k] for k in (
-        "coverage", "global_diversity", "local_diversity", "jitter_ratio", "balance", "eval_preset")}, "trials": trials}
+        "coverage", "global_diversity", "local_diversity", "jitter_ratio", "turning_distance_deg_s", "balance", "eval_preset")}, "trials": trials}

@@ -253,6 +253,11 @@ def _percent(share: float) -> str:
     return f"{100 * share:.1f} %" if 0 < share < 0.01 else f"{100 * share:.0f} %"
 
 
+def turning_allowed(clip_halves_deg_s: float) -> float:
+    """Degrees per second a sample's turning may be from the clip's before it is a flaw."""
+    return max(TURN_FLOOR_DEG_S, TURN_HALVES_FACTOR * clip_halves_deg_s)
+
+
 def verdict(s: dict) -> str:
     if s["root_step_max_ratio"] > TELEPORT_RATIO:
         if s.get("worst_step_contrast", np.inf) > JUMP_CONTRAST:
@@ -264,8 +269,7 @@ def verdict(s: dict) -> str:
     if s["backward_share"] > allowed + BACKWARD_POINTS:
         return (f"walks backwards {100 * s['backward_share']:.0f} % of frames (clip: {100 * s['clip_backward_share']:.0f} %, "
                 f"at most {100 * allowed:.0f} % in any half of it)")
-    turn_allowed = max(TURN_FLOOR_DEG_S, TURN_HALVES_FACTOR * s.get("clip_turning_halves_deg_s", 0.0))
-    if s.get("turning_distance_deg_s", 0.0) > turn_allowed:
+    if s.get("turning_distance_deg_s", 0.0) > turning_allowed(s.get("clip_turning_halves_deg_s", 0.0)):
         return (f"turns unlike the clip: {round(s['turning_deg_s']):+d} deg/s on average (clip: {round(s['clip_turning_deg_s']):+d}), "
                 f"{s['turning_distance_deg_s']:.0f} deg/s apart")
     if s["penetration_cm"] > PENETRATION_CM:
