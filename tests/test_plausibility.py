@@ -151,3 +151,23 @@ def test_turning_is_the_same_on_a_z_up_copy(walk):
     row = plausibility(z_up(walk), [z_up(walk)])["samples"][0]
     assert row["clip_turning_deg_s"] == pytest.approx(plausibility(walk, [walk])["samples"][0]["clip_turning_deg_s"])
     assert row["turning_distance_deg_s"] == 0 and row["verdict"] == "plausible"
+
+
+def _turned_round(clip: BVH, at: int, frames: int) -> BVH:
+    """The clip with the character whipped round 180 degrees over `frames` frames from `at` on:
+    its facing and its path from there turned about the up axis where it stands."""
+    animation = animation_from_bvh(clip)
+    angle = np.pi * np.clip((np.arange(animation.frames) - at) / frames, 0.0, 1.0)
+    turn = axis_matrix(1, angle)
+    rotations = animation.rotations.copy()
+    rotations[:, 0] = turn @ rotations[:, 0]
+    translations = animation.translations.copy()
+    step = np.einsum("tab,tb->ta", turn[1:], np.diff(translations[:, 0], axis=0))
+    translations[1:, 0] = translations[0, 0] + np.cumsum(step, axis=0)
+    return animation_to_bvh(Animation(clip.skeleton, rotations, translations, animation.fps))
+
+
+def test_a_spin_is_named_with_its_frame(walk):
+    row = plausibility(walk, [_turned_round(walk, at=300, frames=6)])["samples"][0]  # 60 fps: 0.1 s
+    assert row["fastest_turn_deg_s"] > 5 * row["clip_fastest_turn_deg_s"]
+    assert row["verdict"].startswith("spins") and "frame 15" in row["verdict"]  # at 30 fps, ends by frame 153-158

@@ -69,6 +69,7 @@ PLAUSIBILITY = (
     ("backward_share", "frames walking backwards", "clip_backward_share"),
     ("turning_deg_s", "turning (deg/s, + left)", "clip_turning_deg_s"),
     ("turning_distance_deg_s", "turning distance (deg/s)", None),
+    ("fastest_turn_deg_s", "fastest turn (deg/s, worst sample)", "clip_fastest_turn_deg_s"),
     ("foot_skating_cm_s", "foot skating (cm/s)", "clip_foot_skating_cm_s"),
     ("foot_bob_cm_s", "planted feet bobbing (cm/s)", "clip_foot_bob_cm_s"),
     ("penetration_cm", "floor penetration (cm)", None),

@@ -1,8 +1,8 @@
 """Plausibility: what an animator sees and the paper's metrics cannot (they read
 rotations and contact bits, not root motion). Per sample, against the clip, at
 30 fps in metres: root steps (teleports), speed distribution, walking against the
-facing direction, turning (how fast the character's heading changes, against the
-clip's), foot skating and bobbing (horizontal and vertical speed of planted feet),
+facing direction, turning and spinning (how fast the character's heading changes,
+over a second and at its fastest, against the clip's), foot skating and bobbing (horizontal and vertical speed of planted feet),
 floor penetration and jitter, and a one-line verdict (bobbing is reported, not
 judged: the cleanup holds ankles, not toes, at their height).
 
@@ -38,6 +38,10 @@ JITTER_RATIO = 2.0
 TURN_WINDOW_S = 1.0
 TURN_FLOOR_DEG_S = 10.0
 TURN_HALVES_FACTOR = 2.0
+# Spinning: the fastest heading change over SPIN_WINDOW_S, against the clip's fastest. Where windows
+# of different headings meet, a world-frame walk whipped round at 200-800 deg/s (its clip: 82).
+SPIN_WINDOW_S = 0.25
+SPIN_RATIO, SPIN_FLOOR_DEG_S = 2.0, 90.0
 # A step this many times the median of its neighbours (3 frames each side) is a jump out of
 # the motion (a teleport); a fast step among fast steps is a motion faster than the clip's.
 JUMP_CONTRAST = 3.0
@@ -95,16 +99,24 @@ def heading_axis(t: Track, up: int, forward: np.ndarray | None) -> np.ndarray:
     return np.eye(3)[int(np.argmin(np.abs(world[..., up]).mean(axis=0)))]
 
 
-def turning_rates(t: Track, axis: np.ndarray, up: int) -> np.ndarray:
-    """Heading change over each TURN_WINDOW_S window, in degrees per second (counter-clockwise
+def turning_rates(t: Track, axis: np.ndarray, up: int, window_s: float = TURN_WINDOW_S) -> np.ndarray:
+    """Heading change over each `window_s` window, in degrees per second (counter-clockwise
     seen from above positive); empty for a motion shorter than a window."""
     facing = np.einsum("tab,b->ta", t.root_rotations, axis)
     first, second = (2, 0) if up == 1 else ((0, 1) if up == 2 else (1, 2))  # right-handed about `up`
     heading = np.unwrap(np.arctan2(facing[:, second], facing[:, first]))
-    frames = int(round(TURN_WINDOW_S * FPS))
+    frames = max(int(round(window_s * FPS)), 1)
     if len(heading) <= frames:
         return np.zeros(0)
-    return np.degrees(heading[frames:] - heading[:-frames]) / TURN_WINDOW_S
+    return np.degrees(heading[frames:] - heading[:-frames]) / (frames / FPS)
+
+
+def fastest_turn(t: Track, axis: np.ndarray, up: int) -> tuple[float, int]:
+    """(deg/s, frame): the fastest heading change over SPIN_WINDOW_S, and where it ends."""
+    rates = np.abs(turning_rates(t, axis, up, SPIN_WINDOW_S))
+    if not len(rates):
+        return 0.0, 0
+    return float(rates.max()), int(rates.argmax()) + max(int(round(SPIN_WINDOW_S * FPS)), 1)
 
 
 def backward_frames(t: Track, forward: np.ndarray | None, up: int) -> np.ndarray:
@@ -195,6 +207,7 @@ class Reference:
     heading_axis: np.ndarray
     turning: np.ndarray  # (windows,) degrees per second
     turning_halves_deg_s: float  # distance between the clip's own halves' turning
+    fastest_turn_deg_s: float
     jerk: float
 
 
@@ -210,7 +223,8 @@ def reference_figures(ref: Track, codec: MotionCodec, contacts: list[int]) -> Re
                      forward=forward, steps=root_steps(ref), speeds=_speeds(ref, up), skating_cm_s=skating, bob_cm_s=bob,
                      backward_share=backward_share(ref, forward, up),
                      backward_half_max=most_backward_half(ref, forward, up), heading_axis=axis, turning=turning,
-                     turning_halves_deg_s=wasserstein_1d(turning[:half], turning[half:]), jerk=jerk(ref))
+                     turning_halves_deg_s=wasserstein_1d(turning[:half], turning[half:]),
+                     fastest_turn_deg_s=fastest_turn(ref, axis, up)[0], jerk=jerk(ref))
 
 
 def score_sample(ref: Reference, sample: Track) -> dict:
@@ -221,6 +235,7 @@ def score_sample(ref: Reference, sample: Track) -> dict:
     skate, bob = planted_speeds_cm_s(sample, ref.contacts, codec.contact_speed, up, ref.floor, size)
     depth = ref.joint_floors - sample.positions[..., up]
     turning = turning_rates(sample, ref.heading_axis, up)
+    spin, spin_frame = fastest_turn(sample, ref.heading_axis, up)
     below = depth > FLOOR_TOLERANCE
     scores = {
         "root_step_max_ratio": _ratio(steps.max(initial=0), max(ref.steps.max(initial=0), floor_step)),
@@ -236,6 +251,9 @@ def score_sample(ref: Reference, sample: Track) -> dict:
         "turning_deg_s": float(turning.mean()) if len(turning) else 0.0,
         "clip_turning_deg_s": float(ref.turning.mean()) if len(ref.turning) else 0.0,
         "clip_turning_halves_deg_s": ref.turning_halves_deg_s,
+        "fastest_turn_deg_s": spin,
+        "fastest_turn_frame": spin_frame,
+        "clip_fastest_turn_deg_s": ref.fastest_turn_deg_s,
         "foot_skating_cm_s": skate,
         "clip_foot_skating_cm_s": ref.skating_cm_s,
         "foot_bob_cm_s": bob,
@@ -269,6 +287,10 @@ def verdict(s: dict) -> str:
     if s["backward_share"] > allowed + BACKWARD_POINTS:
         return (f"walks backwards {100 * s['backward_share']:.0f} % of frames (clip: {100 * s['clip_backward_share']:.0f} %, "
                 f"at most {100 * allowed:.0f} % in any half of it)")
+    spin, clip_spin = s.get("fastest_turn_deg_s", 0.0), s.get("clip_fastest_turn_deg_s", 0.0)
+    if spin > max(SPIN_RATIO * clip_spin, SPIN_FLOOR_DEG_S):
+        return (f"spins: turns {spin:.0f} deg/s at frame {s['fastest_turn_frame']} "
+                f"(the clip's fastest turn: {clip_spin:.0f} deg/s)")
     if s.get("turning_distance_deg_s", 0.0) > turning_allowed(s.get("clip_turning_halves_deg_s", 0.0)):
         return (f"turns unlike the clip: {round(s['turning_deg_s']):+d} deg/s on average (clip: {round(s['clip_turning_deg_s']):+d}), "
                 f"{s['turning_distance_deg_s']:.0f} deg/s apart")
@@ -294,6 +316,7 @@ def plausibility(reference: BVH, samples: list[BVH], units: str | float = "auto"
     rows = [score_sample(ref, track(s, wanted, codec.scale)) for s in samples]
     aggregate = {
         "root_step_max_ratio": max(r["root_step_max_ratio"] for r in rows),
+        "fastest_turn_deg_s": max(r["fastest_turn_deg_s"] for r in rows),
         **{k: float(np.mean([r[k] for r in rows])) for k in (
             "root_step_p99_ratio", "speed_distance_m_s", "backward_share", "turning_distance_deg_s",
             "turning_deg_s", "foot_skating_cm_s",
@@ -302,6 +325,7 @@ def plausibility(reference: BVH, samples: list[BVH], units: str | float = "auto"
         "clip_backward_half_max": rows[0]["clip_backward_half_max"],
         "clip_turning_deg_s": rows[0]["clip_turning_deg_s"],
         "clip_turning_halves_deg_s": rows[0]["clip_turning_halves_deg_s"],
+        "clip_fastest_turn_deg_s": rows[0]["clip_fastest_turn_deg_s"],
         "clip_foot_skating_cm_s": rows[0]["clip_foot_skating_cm_s"],
         "clip_foot_bob_cm_s": rows[0]["clip_foot_bob_cm_s"],
         "implausible": sum(r["verdict"] != "plausible" for r in rows),
