@@ -239,6 +239,23 @@ def root_frame_table(date: str = "2026-12-06") -> str:
     return "\n".join(lines) + "\n"
 
 
+def turning_table(name: str = "turning_2026-12-06") -> str:
+    """bench/turning.py: turning within one window and at the joins of windows, per model."""
+    entries = results(name)
+    if entries is None:
+        return "(no turning results yet)\n"
+    lines = header("model", "frames", "hop", "turning deg/s (clip)", "turning distance deg/s",
+                   "fastest turn per sample, deg/s (clip's)", "verdicts")
+    for entry in entries:
+        for r in entry["rows"]:
+            verdicts = Counter(r["verdicts"])
+            lines.append(f"| {entry['tag']} | {r['frames']} | {r['hop'] or 'one window'} | {fmt(r['turning_deg_s'], 1)} "
+                         f"({fmt(r['clip_turning_deg_s'], 1)}) | {fmt(r['turning_distance_deg_s'], 1)} "
+                         f"| {', '.join(str(v) for v in r['fastest_turn_deg_s'])} ({fmt(r['clip_fastest_turn_deg_s'], 0)}) "
+                         f"| {', '.join(f'{k} {v}' for k, v in sorted(verdicts.items()))} |")
+    return "\n".join(lines) + "\n"
+
+
 def watched_curve_table() -> str:
     """The quality curve of every watched run: the scores at each check."""
     entries = results("watched")
@@ -322,7 +339,7 @@ def contact_floors_table(date: str = "2026-12-06") -> str:
 
 TABLES = {"WATCHED_TABLE": watched_table, "WATCHED_1206_TABLE": lambda: watched_table("watched_2026-12-06", jitter=True),
           "WATCHED_COMPILED_TABLE": lambda: watched_table("watched_compiled_2026-12-06", jitter=True),
-          "ROOT_FRAME_TABLE": root_frame_table,
+          "ROOT_FRAME_TABLE": root_frame_table, "TURNING_TABLE": turning_table,
           "WATCHED_COMPILED_4000_TABLE": lambda: watched_table("watched_compiled_4000_2026-12-06", jitter=True), "WATCHED_CURVE_TABLE": watched_curve_table, "LAYOUTS_TABLE": layouts_table,
           "LAYOUTS_1205_TABLE": lambda: layouts_table("layouts_2026-12-05"),
           "LAYOUTS_1206_TABLE": lambda: layouts_table("layouts_2026-12-06"), "SMOOTHING_TABLE": smoothing_table, "CONTACT_FLOORS_TABLE": contact_floors_table,

@@ -17,7 +17,7 @@ from sinmdm.runtime.bvh import read_bvh
 from sinmdm.runtime.features import build_codec, resample_animation
 from sinmdm.runtime.generate import generate
 from sinmdm.runtime.graph_space import graph_space
-from sinmdm.runtime.heading import clip_heading_frame
+from sinmdm.runtime.heading import clip_heading_frame, close_the_turn
 from sinmdm.runtime.options import SamplingOptions
 
 from .conftest import TINY_TRAIN_ARGS, call_cli, real_clip
@@ -92,7 +92,6 @@ def test_a_heading_model_says_so_and_samples_the_same_bytes_twice(heading_model)
 
 
 @pytest.mark.parametrize("args", [
-    ["sample", "--loop", "--seconds", "3"],
     ["vectors"],
     ["control", "--ref", "TRAJECTORY", "--trajectory", "--source-fps", "30"],  # a path of another skeleton: no heading
 ])
@@ -150,3 +149,20 @@ def test_bad_root_frame_options_are_refused_before_training(tmp_path):
                     "--steps", "2", *TINY_TRAIN_ARGS)
     assert foot.returncode == 2 and "--foot-loss" in foot.stdout + foot.stderr
     assert not (tmp_path / "b" / "checkpoint.pt").exists()
+
+
+@pytest.mark.parametrize("frames, turns", [(100, 0), (400, 1), (1300, 4)])
+def test_a_loop_turns_whole_turns(frames, turns):
+    """30 deg/s for 100 frames (100 deg) loops facing one way; for 400 frames (400 deg), one circle;
+    the difference is spread evenly, so the wrap turns like every other frame."""
+    x = np.zeros((1, 5, frames), dtype=np.float32)
+    x[:, -1] = np.radians(30.0)  # rad/s at 30 fps
+    close_the_turn(x, 30.0)
+    assert x[0, -1].sum() / 30.0 == pytest.approx(2 * np.pi * turns, abs=1e-4)
+    assert np.ptp(x[0, -1]) < 1e-6
+
+
+def test_a_heading_model_samples_loops(heading_model):
+    path, _, _ = heading_model
+    result = generate(load_model(path), 120, SamplingOptions(count=2, seed=0, steps=5), loop=True)
+    assert result.loop_displacement.shape == (2, 2) and np.isfinite(result.features).all()

@@ -193,3 +193,14 @@ class GuidedHeading:
                 heading = np.concatenate([[0.0], np.cumsum(rate[n, 1:])])
         x[:, -1, :] = (rate * self.frame.fps).astype(x.dtype)
         return starts
+
+
+def close_the_turn(x: np.ndarray, fps: float) -> None:
+    """x (N, G, T) a loop in the graph's space (frame 0's rate is the step across the wrap):
+    its turn per cycle rounded to whole turns, the difference spread evenly over the cycle's
+    rates, so the facing at the wrap flows into the first frame's. A walk in a circle loops
+    as a circle; a motion that turns a little loops facing one way."""
+    rate = x[:, -1, :].astype(np.float64)
+    total = rate.sum(axis=-1) / fps
+    missing = 2 * np.pi * np.round(total / (2 * np.pi)) - total
+    x[:, -1, :] = (rate + (missing * fps / rate.shape[-1])[:, None]).astype(x.dtype)

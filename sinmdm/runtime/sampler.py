@@ -25,7 +25,7 @@ import numpy as np
 
 from .errors import OptionError, SinMDMError
 from .graph_space import GraphSpace
-from .heading import GuidedHeading
+from .heading import GuidedHeading, close_the_turn
 from .model import MotionModel
 from .options import DEFAULT_STEPS, EDGE_MARGIN, SAMPLERS, SamplingOptions  # noqa: F401 (re-exported)
 from .schedule import Schedule
@@ -280,9 +280,6 @@ def sample_features(
     if loop and guide is not None:
         raise SinMDMError("loop cannot be combined with guides (applications): sample a loop without one")
     space = model.graph_space  # features <-> the graph's space
-    if space.heading is not None and loop:
-        raise SinMDMError("this model sees motion from the character's heading (trained with --root-frame heading): "
-                          "loops need a model trained with --root-frame world")
     heading = None
     if guide is not None and space.heading is not None:
         heading = GuidedHeading(space.heading, guide.reference, guide.keep, guide.harmonize)
@@ -307,6 +304,8 @@ def sample_features(
             harmonize = ilvr(schedule, reference, region, guide.factor, stop_t, streams)
     x = sample_loop(denoise, schedule, x, streams, options.sampler, options.eta, compose, harmonize, progress)
     x = x[:, :, margin : margin + frames]
+    if loop and space.heading is not None:
+        close_the_turn(x, space.heading.fps)
     return to_features(x, space, None if heading is None else heading.starts(x))
 
 
