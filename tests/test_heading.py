@@ -92,7 +92,6 @@ def test_a_heading_model_says_so_and_samples_the_same_bytes_twice(heading_model)
 
 
 @pytest.mark.parametrize("args", [
-    ["vectors"],
     ["control", "--ref", "TRAJECTORY", "--trajectory", "--source-fps", "30"],  # a path of another skeleton: no heading
 ])
 def test_what_a_heading_model_cannot_do_is_refused_in_one_line(heading_model, args, tmp_path):
@@ -157,7 +156,7 @@ def test_a_loop_turns_whole_turns(frames, turns):
     the difference is spread evenly, so the wrap turns like every other frame."""
     x = np.zeros((1, 5, frames), dtype=np.float32)
     x[:, -1] = np.radians(30.0)  # rad/s at 30 fps
-    close_the_turn(x, 30.0)
+    x = close_the_turn(x, 30.0)
     assert x[0, -1].sum() / 30.0 == pytest.approx(2 * np.pi * turns, abs=1e-4)
     assert np.ptp(x[0, -1]) < 1e-6
 
@@ -166,3 +165,19 @@ def test_a_heading_model_samples_loops(heading_model):
     path, _, _ = heading_model
     result = generate(load_model(path), 120, SamplingOptions(count=2, seed=0, steps=5), loop=True)
     assert result.loop_displacement.shape == (2, 2) and np.isfinite(result.features).all()
+
+
+@pytest.mark.parametrize("args", [["--frames", "120", "--steps", "4"], ["--frames", "100", "--loop", "--steps", "4"]])
+def test_the_node_port_reproduces_a_heading_model_s_vectors(heading_model, args, tmp_path):
+    """The golden vectors hold the chain in the graph's space (F + 1 channels); the Node port turns
+    the heading back as the runtime does (ports/node/lib/sampler.js)."""
+    from .test_node_port import TOLERANCE, run_check
+
+    path, _, _ = heading_model
+    call_cli("sinmdm-run", "vectors", str(path), "--out", str(tmp_path / "v"), "--threads", "1", *args, check=True)
+    manifest = json.loads((tmp_path / "v" / "manifest.json").read_text())
+    assert manifest["graph_width"] == manifest["features"] + 1
+    result = run_check(path, tmp_path / "v", "--json")
+    assert result.returncode == 0, result.stdout + result.stderr
+    report = json.loads(result.stdout)
+    assert report["ok"] and report["features"] <= TOLERANCE and report["positions_of_size"] <= TOLERANCE

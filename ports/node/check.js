@@ -81,7 +81,7 @@ async function check(modelPath, dir, tolerance) {
 
   const F = manifest.features;
   const T = manifest.length;
-  const size = F * T;
+  const size = (manifest.graph_width ?? F) * T; // the chain's channels
   let worstX0 = 0;
   let worstXt = 0;
   const result = await sampleFeatures(ort, session, metadata, {

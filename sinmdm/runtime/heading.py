@@ -195,12 +195,14 @@ class GuidedHeading:
         return starts
 
 
-def close_the_turn(x: np.ndarray, fps: float) -> None:
-    """x (N, G, T) a loop in the graph's space (frame 0's rate is the step across the wrap):
-    its turn per cycle rounded to whole turns, the difference spread evenly over the cycle's
-    rates, so the facing at the wrap flows into the first frame's. A walk in a circle loops
-    as a circle; a motion that turns a little loops facing one way."""
+def close_the_turn(x: np.ndarray, fps: float) -> np.ndarray:
+    """x (N, G, T) a loop in the graph's space (frame 0's rate is the step across the wrap),
+    with its turn per cycle rounded to whole turns, the difference spread evenly over the
+    cycle's rates, so the facing at the wrap flows into the first frame's. A walk in a circle
+    loops as a circle; a motion that turns a little loops facing one way."""
     rate = x[:, -1, :].astype(np.float64)
     total = rate.sum(axis=-1) / fps
     missing = 2 * np.pi * np.round(total / (2 * np.pi)) - total
-    x[:, -1, :] = (rate + (missing * fps / rate.shape[-1])[:, None]).astype(x.dtype)
+    out = x.copy()
+    out[:, -1, :] = (rate + (missing * fps / rate.shape[-1])[:, None]).astype(x.dtype)
+    return out

@@ -303,15 +303,15 @@ def sample_features(
             stop_t = HARMONIZE_STOP * len(model.alphas_cumprod)
             harmonize = ilvr(schedule, reference, region, guide.factor, stop_t, streams)
     x = sample_loop(denoise, schedule, x, streams, options.sampler, options.eta, compose, harmonize, progress)
-    x = x[:, :, margin : margin + frames]
-    if loop and space.heading is not None:
-        close_the_turn(x, space.heading.fps)
-    return to_features(x, space, None if heading is None else heading.starts(x))
+    return to_features(x[:, :, margin : margin + frames], space, loop, heading)
 
 
-def to_features(x: np.ndarray, space: GraphSpace, starts: np.ndarray | None = None) -> np.ndarray:
-    """(N, G, T) in the graph's space -> (N, T, F) float32 features; `starts`: (N,) start
-    headings of a heading-frame model (default its clip's)."""
+def to_features(x: np.ndarray, space: GraphSpace, loop: bool = False, heading: GuidedHeading | None = None) -> np.ndarray:
+    """(N, G, T) in the graph's space -> (N, T, F) float32 features. A heading-frame model's
+    loop turns whole turns; its guided samples start facing as their reference (`heading`)."""
+    if space.heading is not None and loop:
+        x = close_the_turn(x, space.heading.fps)
+    starts = None if heading is None else heading.starts(x)
     if space.heading is not None:
         return space.to_features(x.transpose(0, 2, 1), starts).astype(np.float32)
     if space.scale is not None:  # float32 division of the float32 state, as docs/runtime.md specifies for ports

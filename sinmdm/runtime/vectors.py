@@ -19,7 +19,7 @@ import numpy as np
 from .. import __version__
 from .animation import global_positions
 from .atomic import OutputSet, file_sha256
-from .errors import OptionError, SinMDMError
+from .errors import OptionError
 from .model import MotionModel
 from .options import SamplingOptions
 from .rig import skeleton_extent
@@ -103,15 +103,13 @@ class Recording:
 
 def record(model: MotionModel, planned: Plan) -> Recording:
     """Run the planned sample through the real loop, its chain kept, and decode it."""
-    if model.graph_space.heading is not None:  # the other runtimes' ports know the paper's features only
-        raise SinMDMError("golden vectors are written for models trained with --root-frame world only")
     options, margin, frames, schedule = planned.options, planned.margin, planned.frames, planned.schedule
     length = planned.denoise.frames
     stream = RecordingStream(np.random.default_rng(options.seed))
     x_T = draw([stream], (model.graph_width, length), STATE_DTYPE)
     recorder = RecordingDenoiser(planned.denoise)
     x_0 = sample_loop(recorder, schedule, x_T.copy(), [stream], options.sampler, options.eta)
-    features = to_features(x_0[:, :, margin : margin + frames], model.graph_space)[0]
+    features = to_features(x_0[:, :, margin : margin + frames], model.graph_space, planned.loop)[0]
 
     size = model.graph_width * length
     normals = stream.normals()
@@ -168,6 +166,7 @@ def manifest(model: MotionModel, model_path: Path, recording: Recording) -> dict
         "state_dtype": np.dtype(STATE_DTYPE).name,
         "length": denoise.frames,
         "features": model.features,
+        "graph_width": model.graph_width,  # the chain's channels: the features, and a heading-frame model's turn rate
         "cut": [planned.margin, planned.margin + frames],
         "window": denoise.window,
         "window_starts": denoise.starts.tolist(),
