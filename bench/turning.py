@@ -45,7 +45,7 @@ def main() -> None:
                      "clip_turning_deg_s": a["clip_turning_deg_s"], "turning_distance_deg_s": a["turning_distance_deg_s"],
                      "fastest_turn_deg_s": [round(s["fastest_turn_deg_s"]) for s in scores["samples"]],
                      "clip_fastest_turn_deg_s": a["clip_fastest_turn_deg_s"],
-                     "verdicts": [s["verdict"].split(":")[0] for s in scores["samples"]]})
+                     "verdicts": [s["verdict"] for s in scores["samples"]]})
         print(json.dumps(rows[-1]), flush=True)
     results = json.loads(args.results.read_text()) if args.results.exists() else []
     results = [r for r in results if r["tag"] != args.tag] + [
