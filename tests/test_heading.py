@@ -181,3 +181,28 @@ def test_the_node_port_reproduces_a_heading_model_s_vectors(heading_model, args,
     assert result.returncode == 0, result.stdout + result.stderr
     report = json.loads(result.stdout)
     assert report["ok"] and report["features"] <= TOLERANCE and report["positions_of_size"] <= TOLERANCE
+
+
+@pytest.mark.parametrize("name, frame", [("Joe_Walk-In-Circle.bvh", "heading"), ("Crabnew_Crab-dance-long.bvh", "world"),
+                                         ("Joe_Baseball-Milling-Idle.bvh", "world"), ("Xia_proud.bvh", "world")])
+def test_the_cpu_preset_chooses_the_heading_frame_for_a_clip_that_turns_steadily(name, frame):
+    from sinmdm.train.presets import preset
+    from sinmdm.train.trainer import choose_root_frame, load_clip
+
+    options = {"units": "auto", "source_fps": None, "root": None, "up": "auto", "contacts": "auto"}
+    clip = load_clip(real_clip(name), 30.0, options)
+    chosen, why = choose_root_frame(clip, preset("cpu"))
+    assert chosen == frame and why.startswith("auto: the clip turns")
+    assert choose_root_frame(clip, preset("paper")) == ("world", "asked for")  # the paper's features, always
+
+
+def test_a_walk_in_a_circle_on_a_production_layout_is_trained_in_the_heading_frame(tmp_path):
+    from sinmdm.runtime.bvh import write_bvh
+
+    clip = tmp_path / "walk_static_root_z_up.bvh"
+    write_bvh(clip, z_up(with_static_root(read_bvh(real_clip("Joe_Walk-In-Circle.bvh")))))
+    call_cli("sinmdm", "train", str(clip), "--out", str(tmp_path / "run"), "--steps", "2", *TINY_TRAIN_ARGS, check=True)
+    config = json.loads((tmp_path / "run" / "config.json").read_text())
+    assert config["root_frame"]["frame"] == "heading" and config["train"]["root_frame"] == "auto"
+    info = call_cli("sinmdm", "info", str(tmp_path / "run"), check=True)
+    assert "heading (auto: the clip turns +28.7 deg/s" in " ".join((info.stdout + info.stderr).split())

@@ -55,7 +55,7 @@ def train(
                                            "band, before training stops early (default 3; --steps trains to the end)."),
     norm: Optional[str] = typer.Option(None, "--norm", help="group (the paper's GroupNorm over the window) or frame (per-frame, a strictly local model; see BENCHMARKS.md)."),
     velocity_unit: Optional[str] = typer.Option(None, "--velocity-unit", help="frame (the paper: root velocity in metres per frame) or second (metres per second: the root channels at the rotations' size; see BENCHMARKS.md)."),
-    root_frame: Optional[str] = typer.Option(None, "--root-frame", help="world (the paper: the trajectory joint's rotation and velocity in the world) or heading (seen from the character's heading, plus its rate of turn: a clip that turns keeps turning; a loop turns whole turns; a trajectory from another skeleton cannot guide it; see BENCHMARKS.md)."),
+    root_frame: Optional[str] = typer.Option(None, "--root-frame", help="world (the paper: the trajectory joint's rotation and velocity in the world), heading (seen from the character's heading, plus its rate of turn: a clip that turns keeps turning; a trajectory from another skeleton cannot guide it) or auto (the cpu preset: heading for a clip that turns more than 10 deg/s on average; see BENCHMARKS.md)."),
     check_cleanup: Optional[bool] = typer.Option(None, "--check-cleanup/--no-check-cleanup", help="Quality checks sample with the foot cleanup, as `sample` does (default: without; see BENCHMARKS.md)."),
     compile: Optional[bool] = typer.Option(None, "--compile/--no-compile", help="Train through torch.compile (default: when the run has 600 steps or more on a CPU or CUDA device; about 1.4x faster after some 45 s of compiling; falls back to eager if compiling fails)."),
     foot_loss: Optional[float] = typer.Option(None, "--foot-loss", help="Weight of a foot-contact loss (the clip's planted joints kept still in the prediction, by forward kinematics; 0 = the paper's loss alone; see BENCHMARKS.md)."),
@@ -68,17 +68,16 @@ def train(
 
     from ..train.checkpoint import CONFIG
     from ..runtime.features import VELOCITY_UNITS
-    from ..runtime.heading import ROOT_FRAMES
     from ..train.model import NORM_KINDS
     from ..train.presets import preset as get_preset
-    from ..train.trainer import kept_sampling, resumed_budget, train as run_training
+    from ..train.trainer import ROOT_FRAME_CHOICES, kept_sampling, resumed_budget, train as run_training
 
     if norm is not None and norm not in NORM_KINDS:
         raise SinMDMError(f"--norm must be {' or '.join(NORM_KINDS)}, got '{norm}'")
     if velocity_unit is not None and velocity_unit not in VELOCITY_UNITS:
         raise SinMDMError(f"--velocity-unit must be {' or '.join(VELOCITY_UNITS)}, got '{velocity_unit}'")
-    if root_frame is not None and root_frame not in ROOT_FRAMES:
-        raise SinMDMError(f"--root-frame must be {' or '.join(ROOT_FRAMES)}, got '{root_frame}'")
+    if root_frame is not None and root_frame not in ROOT_FRAME_CHOICES:
+        raise SinMDMError(f"--root-frame must be {', '.join(ROOT_FRAME_CHOICES)}, got '{root_frame}'")
     if foot_loss is not None and not (foot_loss >= 0 and math.isfinite(foot_loss)):
         raise SinMDMError(f"--foot-loss must be 0 or a positive number, got {foot_loss}")
     if check_every is not None and check_every < 0:
@@ -186,6 +185,7 @@ def info(
         "elapsed_seconds": config["elapsed_seconds"],
         "device": config["device"],
         "compiled": config.get("compiled"),
+        "root_frame": config.get("root_frame"),
         "train": config["train"],
         "model": config["model"],
         "watch": config.get("watch"),
@@ -201,8 +201,8 @@ def info(
         value = summary[key]
         table.add_row(key.replace("_", " "), f"{value:,}" if isinstance(value, int) and not isinstance(value, bool) else str(value))
     table.add_row("clip", f"{config['clip']['name']} ({config['clip']['frames']} frames, sha256 {config['clip']['sha256'][:12]})")
-    if config["train"].get("root_frame", "world") != "world":
-        table.add_row("root frame", "heading: the trajectory joint seen from the character's heading, plus its rate of turn")
+    chosen = config.get("root_frame") or {"frame": config["train"].get("root_frame", "world"), "why": "asked for"}
+    table.add_row("root frame", f"{chosen['frame']} ({chosen['why']})")
     if summary["compiled"]:
         table.add_row("compiled", f"{'yes' if summary['compiled']['on'] else 'no'}: {summary['compiled']['why']}")
     console.print(table)

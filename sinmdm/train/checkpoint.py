@@ -33,7 +33,7 @@ NUMBER = (int, float)
 REQUIRED = {"clip": dict, "codec": dict, "model": dict, "train": dict, "schedule": dict, "seed": int, "window": int,
             "receptive_field": int, "parameters": int, "step": int, "steps": int, "finished": bool, "device": str,
             "elapsed_seconds": NUMBER}
-OPTIONAL = {"loss": NUMBER, "watch": dict, "sampling": dict, "stage": dict, "start_position": list, "heading_frame": dict,
+OPTIONAL = {"loss": NUMBER, "watch": dict, "sampling": dict, "stage": dict, "start_position": list, "heading_frame": dict, "root_frame": dict,
             CHECKSUMS: dict}
 CLIP = {"name": str, "sha256": str, "frames": int}
 WATCH = {"best_step": int, "checks": int}

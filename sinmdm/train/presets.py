@@ -35,7 +35,9 @@ class TrainConfig:
     check_cleanup: bool = False  # checks sample with the foot cleanup (what `sample` gives) instead of without
     foot_loss: float = 0.0  # weight of the foot-contact loss (train/foot_loss.py; 0 = the paper's loss alone)
     velocity_unit: str = "frame"  # the root velocity channels in metres per "frame" (paper) or "second" (runtime.features.model_scale)
-    root_frame: str = "world"  # the trajectory joint seen in the "world" (paper) or from its "heading" (runtime.heading)
+    # the trajectory joint seen in the "world" (paper) or from its "heading" (runtime.heading);
+    # "auto": the heading for a clip that turns steadily, the world otherwise (trainer.choose_root_frame)
+    root_frame: str = "world"
 
     def to_dict(self) -> dict:
         data = asdict(self)
@@ -67,6 +69,7 @@ PRESETS = {
         bf16=True,
         check_every=200,
         fallback_norm="frame",
+        root_frame="auto",
     ),
 }
 

@@ -79,20 +79,49 @@ class ClipData:
     bvh: BVH
 
 
-def graph_metadata(clip: ClipData, config: TrainConfig) -> dict:
-    """How the model's graph sees the clip's features (runtime.graph_space), as its metadata says it."""
-    if config.root_frame not in ROOT_FRAMES:
-        raise SinMDMError(f"unknown root frame {config.root_frame!r}: use {' or '.join(ROOT_FRAMES)}")
-    heading = None
-    if config.root_frame == "heading":
-        codec = clip.codec
-        joint = None if codec.trajectory_joint is None else codec.skeleton.names[codec.trajectory_joint]
-        if not any(b.kind == "rotation" and b.joint == joint for b in codec.layout.blocks):
+ROOT_FRAME_CHOICES = ROOT_FRAMES + ("auto",)
+# A clip whose heading turns faster than this on average (its net turn over its length) is
+# trained in the heading frame by `auto`: a world-frame model of the walk in a circle (29 deg/s)
+# never turned, in one window or at the joins, and spun where windows met; in the heading frame
+# it walked circles. Clips that turn back and forth or barely (crab 1.9, idle 0.1, Xia 1-3, the
+# elephant 0 deg/s) keep the world frame: the crab in the heading frame reached half the world
+# frame's coverage at the same step (BENCHMARKS.md, "Turning, spins and the heading frame").
+AUTO_HEADING_DEG_S = 10.0
+
+
+def choose_root_frame(clip: ClipData, config: TrainConfig) -> tuple[str, str]:
+    """(frame, why) for `config.root_frame` on this clip."""
+    if config.root_frame not in ROOT_FRAME_CHOICES:
+        raise SinMDMError(f"unknown root frame {config.root_frame!r}: use {', '.join(ROOT_FRAME_CHOICES)}")
+    codec = clip.codec
+    joint = None if codec.trajectory_joint is None else codec.skeleton.names[codec.trajectory_joint]
+    turnable = any(b.kind == "rotation" and b.joint == joint for b in codec.layout.blocks)
+    if config.root_frame != "auto":
+        if config.root_frame == "heading" and not turnable:
             raise SinMDMError("--root-frame heading needs a trajectory joint with rotation channels; this clip has none")
+        return config.root_frame, "asked for"
+    if not turnable:
+        return "world", "auto: the clip has no trajectory joint with rotation channels"
+    if config.foot_loss > 0:
+        return "world", "auto: the foot-contact loss works on world-frame features"
+    features = np.asarray(clip.features, dtype=np.float64)
+    headings = clip_heading_frame(codec, features).headings(features)
+    rate = float(np.degrees(headings[-1] - headings[0]) / max((len(features) - 1) / codec.fps, 1e-9))
+    if abs(rate) > AUTO_HEADING_DEG_S:
+        return "heading", f"auto: the clip turns {rate:+.1f} deg/s on average, more than {AUTO_HEADING_DEG_S:g}"
+    return "world", f"auto: the clip turns {rate:+.1f} deg/s on average, not more than {AUTO_HEADING_DEG_S:g}"
+
+
+def graph_metadata(clip: ClipData, config: TrainConfig) -> dict:
+    """How the model's graph sees the clip's features (runtime.graph_space), as its metadata says
+    it, and why its root frame was chosen."""
+    frame, why = choose_root_frame(clip, config)
+    heading = None
+    if frame == "heading":
         if config.foot_loss > 0:
             raise SinMDMError("--foot-loss works on world-frame features: it cannot be combined with --root-frame heading")
-        heading = clip_heading_frame(codec, clip.features).to_dict()
-    return {"velocity_unit": config.velocity_unit, "heading_frame": heading}
+        heading = clip_heading_frame(clip.codec, clip.features).to_dict()
+    return {"velocity_unit": config.velocity_unit, "heading_frame": heading, "root_frame": {"frame": frame, "why": why}}
 
 
 def load_clip(path: Path, fps: float, codec_options: dict) -> ClipData:
@@ -213,6 +242,7 @@ class Run:
             "codec": self.clip.codec.to_dict(),
             "start_position": [float(v) for v in self.clip.start],
             **({"heading_frame": self.graph_metadata["heading_frame"]} if self.graph_metadata["heading_frame"] else {}),
+            "root_frame": self.graph_metadata["root_frame"],
             "model": self.model_config.to_dict(),
             "train": self.config.to_dict(),
             "seed": self.seed,
