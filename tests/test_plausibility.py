@@ -124,18 +124,26 @@ def test_a_recombination_of_the_clips_own_halves_is_not_called_backwards():
     assert "backwards" not in row["verdict"]
 
 
-def _straightened(clip: BVH) -> BVH:
-    """The clip with its root's turning taken out: the same gait walked along a straight line."""
+def _yawed(clip: BVH, angles) -> BVH:
+    """The clip with its root turned about the up axis by `angles(animation)` (radians per frame),
+    its path turned with it where it stands."""
     animation = animation_from_bvh(clip)
-    facing = animation.rotations[:, 0] @ np.array([0.0, 0.0, 1.0])
-    heading = np.unwrap(np.arctan2(facing[:, 0], facing[:, 2]))
-    undo = axis_matrix(1, heading[0] - heading)  # (T, 3, 3) about Y
+    turn = axis_matrix(1, angles(animation))
     rotations = animation.rotations.copy()
-    rotations[:, 0] = undo @ rotations[:, 0]
+    rotations[:, 0] = turn @ rotations[:, 0]
     translations = animation.translations.copy()
-    step = np.einsum("tab,tb->ta", undo[1:], np.diff(translations[:, 0], axis=0))
+    step = np.einsum("tab,tb->ta", turn[1:], np.diff(translations[:, 0], axis=0))
     translations[1:, 0] = translations[0, 0] + np.cumsum(step, axis=0)
     return animation_to_bvh(Animation(clip.skeleton, rotations, translations, animation.fps))
+
+
+def _straightened(clip: BVH) -> BVH:
+    """The clip with its root's turning taken out: the same gait walked along a straight line."""
+    def undo(animation):
+        facing = animation.rotations[:, 0] @ np.array([0.0, 0.0, 1.0])
+        heading = np.unwrap(np.arctan2(facing[:, 0], facing[:, 2]))
+        return heading[0] - heading
+    return _yawed(clip, undo)
 
 
 def test_a_walk_that_stops_turning_is_named(walk):
@@ -154,17 +162,8 @@ def test_turning_is_the_same_on_a_z_up_copy(walk):
 
 
 def _turned_round(clip: BVH, at: int, frames: int) -> BVH:
-    """The clip with the character whipped round 180 degrees over `frames` frames from `at` on:
-    its facing and its path from there turned about the up axis where it stands."""
-    animation = animation_from_bvh(clip)
-    angle = np.pi * np.clip((np.arange(animation.frames) - at) / frames, 0.0, 1.0)
-    turn = axis_matrix(1, angle)
-    rotations = animation.rotations.copy()
-    rotations[:, 0] = turn @ rotations[:, 0]
-    translations = animation.translations.copy()
-    step = np.einsum("tab,tb->ta", turn[1:], np.diff(translations[:, 0], axis=0))
-    translations[1:, 0] = translations[0, 0] + np.cumsum(step, axis=0)
-    return animation_to_bvh(Animation(clip.skeleton, rotations, translations, animation.fps))
+    """The clip with the character whipped round 180 degrees over `frames` frames from `at` on."""
+    return _yawed(clip, lambda animation: np.pi * np.clip((np.arange(animation.frames) - at) / frames, 0.0, 1.0))
 
 
 def test_a_spin_is_named_with_its_frame(walk):

@@ -20,10 +20,10 @@ from ..runtime.animation import animation_from_bvh
 from ..runtime.bvh import BVH
 from ..runtime.contacts import contact_labels
 from ..runtime.features import MotionCodec, build_codec, resample_animation
+from ..runtime.heading import MOVING_SPEED, travel_axis, yaw
 from ..runtime.kinematics import forward_kinematics
 
 FPS = 30.0
-MOVING_SPEED = 0.1  # m/s: below this the root is standing, its direction means nothing
 FLOOR_TOLERANCE = 0.01  # m below the clip's floor before a joint counts as in it
 # Verdict thresholds: beyond these an animator sees the flaw at playback speed.
 TELEPORT_RATIO = 1.5  # largest root step vs the clip's largest
@@ -90,21 +90,10 @@ def forward_axis(t: Track, up: int) -> np.ndarray | None:
     return local.sum(axis=0) / max(np.linalg.norm(local.sum(axis=0)), 1e-12)
 
 
-def heading_axis(t: Track, up: int, forward: np.ndarray | None) -> np.ndarray:
-    """The trajectory joint's local axis whose yaw is its heading: the axis it travels along,
-    or, for a clip that stands, its most horizontal axis."""
-    if forward is not None:
-        return forward
-    world = np.einsum("tab,kb->tka", t.root_rotations, np.eye(3))
-    return np.eye(3)[int(np.argmin(np.abs(world[..., up]).mean(axis=0)))]
-
-
 def turning_rates(t: Track, axis: np.ndarray, up: int, window_s: float = TURN_WINDOW_S) -> np.ndarray:
     """Heading change over each `window_s` window, in degrees per second (counter-clockwise
     seen from above positive); empty for a motion shorter than a window."""
-    facing = np.einsum("tab,b->ta", t.root_rotations, axis)
-    first, second = (2, 0) if up == 1 else ((0, 1) if up == 2 else (1, 2))  # right-handed about `up`
-    heading = np.unwrap(np.arctan2(facing[:, second], facing[:, first]))
+    heading = np.unwrap(yaw(np.einsum("tab,b->ta", t.root_rotations, axis), up))
     frames = max(int(round(window_s * FPS)), 1)
     if len(heading) <= frames:
         return np.zeros(0)
@@ -216,7 +205,7 @@ def reference_figures(ref: Track, codec: MotionCodec, contacts: list[int]) -> Re
     floor = float(np.percentile(ref.positions[..., up].min(axis=1), 2))
     forward = forward_axis(ref, up)
     skating, bob = planted_speeds_cm_s(ref, contacts, codec.contact_speed, up, floor, codec.size)
-    axis = heading_axis(ref, up, forward)
+    axis = travel_axis(ref.root_rotations[1:], np.diff(ref.positions[:, 0], axis=0) * FPS, up)
     turning = turning_rates(ref, axis, up)
     half = len(turning) // 2
     return Reference(codec=codec, contacts=contacts, floor=floor, joint_floors=joint_floors(ref, floor, up),

@@ -55,8 +55,7 @@ class HeadingFrame:
     def headings(self, features: np.ndarray) -> np.ndarray:
         """(..., T) radians, unwrapped along T: the yaw of the forward axis."""
         facing = sixd_to_matrix(features[..., list(self.rotation)].reshape(features.shape[:-1] + (6,))) @ self.forward
-        u, v = (self.up + 1) % 3, (self.up + 2) % 3  # axis_matrix(up, a) turns u towards v by a
-        return np.unwrap(np.arctan2(facing[..., v], facing[..., u]), axis=-1)
+        return np.unwrap(yaw(facing, self.up), axis=-1)
 
     def _turned(self, features: np.ndarray, angles: np.ndarray) -> np.ndarray:
         """Features with the trajectory joint's rotation and velocity turned by `angles` (..., T)."""
@@ -84,6 +83,12 @@ class HeadingFrame:
         first = np.asarray(self.start if start is None else start, dtype=np.float64)[..., None]
         heading = first + np.concatenate([np.zeros(rate.shape[:-1] + (1,)), np.cumsum(rate[..., 1:], axis=-1)], axis=-1)
         return self._turned(x[..., :-1], heading)
+
+
+def yaw(vectors: np.ndarray, up: int) -> np.ndarray:
+    """(..., 3) -> (...,) radians about axis `up`, by the right-hand rule (as axis_matrix turns)."""
+    u, v = (up + 1) % 3, (up + 2) % 3  # axis_matrix(up, a) turns u towards v by a
+    return np.arctan2(vectors[..., v], vectors[..., u])
 
 
 def travel_axis(rotations: np.ndarray, velocity: np.ndarray, up: int) -> np.ndarray:
