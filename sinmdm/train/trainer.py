@@ -84,8 +84,9 @@ ROOT_FRAME_CHOICES = ROOT_FRAMES + ("auto",)
 # trained in the heading frame by `auto`: a world-frame model of the walk in a circle (29 deg/s)
 # never turned, in one window or at the joins, and spun where windows met; in the heading frame
 # it walked circles. Clips that turn back and forth or barely (crab 1.9, idle 0.1, Xia 1-3, the
-# elephant 0 deg/s) keep the world frame: the crab's samples in the heading frame covered 69 % of
-# the clip against the world frame's 84 % (BENCHMARKS.md, "Turning, spins and the heading frame").
+# elephant 0 deg/s) keep the world frame: in the heading frame the crab's samples covered 69 % of
+# the clip against 84 %, the idle's drifted round at 17.5 deg/s and shook, Xia proud lost 0.17 of
+# global diversity (BENCHMARKS.md, "Turning, spins and the heading frame").
 AUTO_HEADING_DEG_S = 10.0
 
 
