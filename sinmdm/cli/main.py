@@ -180,7 +180,7 @@ def info(
         "clip": config["clip"],
         "window": config["window"],
         "receptive_field": config["receptive_field"],
-        "feature_width": config["model"]["features"],
+        "feature_width": config["model"]["features"] - bool(config.get("heading_frame")),  # the graph adds the turn rate
         "loss": config["loss"],
         "elapsed_seconds": config["elapsed_seconds"],
         "device": config["device"],
