@@ -192,3 +192,28 @@ def test_damaged_best_checkpoint_is_refused_by_export(watched_run, tmp_path):
     result = run_cli("sinmdm", "export", str(run_dir), "--out", str(tmp_path / "m.onnx"))
     assert_one_line_error(result, str(run_dir / BEST), "corrupted")
     assert not list(tmp_path.glob("*.onnx"))
+
+
+class _FixedScores:
+    """A scorer that returns given scores per (steps, hop, smooth): the selection rule alone."""
+
+    def __init__(self, table: dict):
+        self.table = table
+
+    def check(self, model, steps=None, hop=None, smooth=0.0) -> dict:
+        coverage, diversity, jitter = self.table.get((steps, hop, smooth), self.table["default"])
+        return {"coverage": coverage, "global_diversity": diversity, "local_diversity": diversity, "jitter_ratio": jitter,
+                "turning_distance_deg_s": 0.0, "root_step_max_ratio": 1.0, "eval_preset": "mixamo24", "check_seconds": 0.0,
+                "balance": balance(coverage, diversity, jitter)}
+
+
+def test_smoothing_is_kept_where_it_calms_jittery_samples_for_little_diversity():
+    # the heading-frame walk's calibration: 2.80x -> 1.27x for 0.03 of diversity (the balance fell 0.024)
+    from sinmdm.eval.balance import choose_sampling
+
+    calm = _FixedScores({"default": (100.0, 1.35, 2.80), (10, 48, 1.0): (99.9, 1.32, 1.27)})
+    assert choose_sampling(None, calm, 64)["smooth"] == 1.0
+    costly = _FixedScores({"default": (100.0, 1.35, 2.80), (10, 48, 1.0): (99.9, 1.20, 1.27)})  # 0.15 of diversity
+    assert choose_sampling(None, costly, 64)["smooth"] == 0.0
+    steady = _FixedScores({"default": (100.0, 1.35, 1.80), (10, 48, 1.0): (99.9, 1.32, 1.10)})  # not jittery: balance rules
+    assert choose_sampling(None, steady, 64)["smooth"] == 0.0

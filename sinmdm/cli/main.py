@@ -296,7 +296,8 @@ def calibrate(
                       f"{t['check_seconds']:.1f}")
     console.print(table)
     console.print(f"sampling defaults: {chosen['steps']} steps, hop {chosen['hop']}{_smooth_words(chosen)} (the cheapest "
-                  f"setting within {BALANCE_TOLERANCE:g} of the first's balance, sampled "
+                  f"setting within {BALANCE_TOLERANCE:g} of the first's balance; smoothing also where it calms jittery "
+                  f"samples for little diversity; sampled "
                   f"{'with' if chosen['cleanup'] else 'without'} the foot cleanup), written into {', '.join(str(m) for m in models)}")
 
 

@@ -30,7 +30,7 @@ from ..runtime.model import MotionModel
 from ..runtime.options import SamplingOptions
 from . import metrics
 from .motion_features import MIXAMO24_JOINTS, eval_features, protocol_for, resolve_joints
-from .plausibility import TELEPORT_RATIO, TURN_FLOOR_DEG_S, plausibility, turning_allowed
+from .plausibility import JITTER_RATIO, TELEPORT_RATIO, TURN_FLOOR_DEG_S, plausibility, turning_allowed
 
 COVERAGE_BAND = 95.0  # % : below this the model drifts from the clip
 DIVERSITY_BAND = 1.3  # global diversity: below this the model copies
@@ -55,6 +55,12 @@ BALANCE_TOLERANCE = 0.02
 # tenth) and its global diversity by 0.09, beyond what the balance sees on a model short
 # of coverage (docs/smoothing_walk.png, BENCHMARKS.md).
 SMOOTH_CANDIDATES = (1.0,)
+# Smoothing is also kept, beyond BALANCE_TOLERANCE, when it takes samples judged jittery (above the
+# verdict's JITTER_RATIO) to below it for at most this much global diversity: the balance sees jitter
+# only past JITTER_LIMIT. The heading-frame walk's checks: jitter 2.35x -> 1.32x for 0.036 of
+# diversity (balance 1.014 -> 0.986); on its 20 benchmark samples 3.14x -> 1.63x, 0 -> 17 of 20
+# plausible, global diversity 1.236 -> 1.215 (BENCHMARKS.md, "Turning, spins and the heading frame").
+SMOOTH_DIVERSITY_COST = 0.05
 
 
 def balance(coverage: float, global_diversity: float, jitter_ratio: float | None = None,
@@ -159,7 +165,9 @@ def choose_sampling(model: MotionModel, scorer: ClipScorer, window: int) -> dict
             break
         smoothed = {**chosen, "smooth": sigma, **scorer.check(model, steps=chosen["steps"], hop=chosen["hop"], smooth=sigma)}
         trials.append(smoothed)
-        if smoothed["balance"] < unsmoothed - BALANCE_TOLERANCE or not keepable(smoothed):
+        calmed = (chosen["jitter_ratio"] > JITTER_RATIO >= smoothed["jitter_ratio"]
+                  and smoothed["global_diversity"] >= chosen["global_diversity"] - SMOOTH_DIVERSITY_COST)
+        if (smoothed["balance"] < unsmoothed - BALANCE_TOLERANCE and not calmed) or not keepable(smoothed):
             break
         chosen = smoothed
     return {"steps": chosen["steps"], "hop": chosen["hop"], "smooth": chosen["smooth"], "scores": {k: chosen[k] for k in (
