@@ -191,9 +191,10 @@ def test_the_cpu_preset_chooses_the_heading_frame_for_a_clip_that_turns_steadily
 
     options = {"units": "auto", "source_fps": None, "root": None, "up": "auto", "contacts": "auto"}
     clip = load_clip(real_clip(name), 30.0, options)
-    chosen, why = choose_root_frame(clip, preset("cpu"))
+    heading = clip_heading_frame(clip.codec, clip.features)
+    chosen, why = choose_root_frame(clip, preset("cpu"), heading)
     assert chosen == frame and why.startswith("auto: the clip turns")
-    assert choose_root_frame(clip, preset("paper")) == ("world", "asked for")  # the paper's features, always
+    assert choose_root_frame(clip, preset("paper"), heading) == ("world", "asked for")  # the paper's features, always
 
 
 def test_a_walk_in_a_circle_on_a_production_layout_is_trained_in_the_heading_frame(tmp_path):

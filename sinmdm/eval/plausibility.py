@@ -20,7 +20,7 @@ from ..runtime.animation import animation_from_bvh
 from ..runtime.bvh import BVH
 from ..runtime.contacts import contact_labels
 from ..runtime.features import MotionCodec, build_codec, resample_animation
-from ..runtime.heading import MOVING_SPEED, travel_axis, yaw
+from ..runtime.heading import MOVING_SPEED, horizontal_axis, moving_axis, yaw
 from ..runtime.kinematics import forward_kinematics
 
 FPS = 30.0
@@ -81,28 +81,27 @@ def step_contrast(steps: np.ndarray, frame: int, reach: int = 3) -> float:
 
 def forward_axis(t: Track, up: int) -> np.ndarray | None:
     """The trajectory joint's local axis the clip travels along (None if it stands)."""
-    velocity = np.diff(t.positions[:, 0], axis=0) * FPS
-    velocity[:, up] = 0.0
-    moving = np.linalg.norm(velocity, axis=-1) > MOVING_SPEED
-    if moving.mean() < 0.2:
-        return None
-    local = np.einsum("tba,tb->ta", t.root_rotations[1:][moving], velocity[moving])
-    return local.sum(axis=0) / max(np.linalg.norm(local.sum(axis=0)), 1e-12)
+    return moving_axis(t.root_rotations[1:], np.diff(t.positions[:, 0], axis=0) * FPS, up)
 
 
-def turning_rates(t: Track, axis: np.ndarray, up: int, window_s: float = TURN_WINDOW_S) -> np.ndarray:
-    """Heading change over each `window_s` window, in degrees per second (counter-clockwise
-    seen from above positive); empty for a motion shorter than a window."""
-    heading = np.unwrap(yaw(np.einsum("tab,b->ta", t.root_rotations, axis), up))
+def headings(t: Track, axis: np.ndarray, up: int) -> np.ndarray:
+    """(T,) radians, unwrapped: the yaw of the trajectory joint's `axis` (+ = counter-clockwise
+    seen from above)."""
+    return np.unwrap(yaw(np.einsum("tab,b->ta", t.root_rotations, axis), up))
+
+
+def turning_rates(heading: np.ndarray, window_s: float = TURN_WINDOW_S) -> np.ndarray:
+    """Heading change over each `window_s` window of (T,) `headings`, in degrees per second;
+    empty for a motion shorter than a window."""
     frames = max(int(round(window_s * FPS)), 1)
     if len(heading) <= frames:
         return np.zeros(0)
     return np.degrees(heading[frames:] - heading[:-frames]) / (frames / FPS)
 
 
-def fastest_turn(t: Track, axis: np.ndarray, up: int) -> tuple[float, int]:
+def fastest_turn(heading: np.ndarray) -> tuple[float, int]:
     """(deg/s, frame): the fastest heading change over SPIN_WINDOW_S, and where it ends."""
-    rates = np.abs(turning_rates(t, axis, up, SPIN_WINDOW_S))
+    rates = np.abs(turning_rates(heading, SPIN_WINDOW_S))
     if not len(rates):
         return 0.0, 0
     return float(rates.max()), int(rates.argmax()) + max(int(round(SPIN_WINDOW_S * FPS)), 1)
@@ -205,15 +204,16 @@ def reference_figures(ref: Track, codec: MotionCodec, contacts: list[int]) -> Re
     floor = float(np.percentile(ref.positions[..., up].min(axis=1), 2))
     forward = forward_axis(ref, up)
     skating, bob = planted_speeds_cm_s(ref, contacts, codec.contact_speed, up, floor, codec.size)
-    axis = travel_axis(ref.root_rotations[1:], np.diff(ref.positions[:, 0], axis=0) * FPS, up)
-    turning = turning_rates(ref, axis, up)
+    axis = horizontal_axis(ref.root_rotations[1:], up) if forward is None else forward
+    heading = headings(ref, axis, up)
+    turning = turning_rates(heading)
     half = len(turning) // 2
     return Reference(codec=codec, contacts=contacts, floor=floor, joint_floors=joint_floors(ref, floor, up),
                      forward=forward, steps=root_steps(ref), speeds=_speeds(ref, up), skating_cm_s=skating, bob_cm_s=bob,
                      backward_share=backward_share(ref, forward, up),
                      backward_half_max=most_backward_half(ref, forward, up), heading_axis=axis, turning=turning,
                      turning_halves_deg_s=wasserstein_1d(turning[:half], turning[half:]),
-                     fastest_turn_deg_s=fastest_turn(ref, axis, up)[0], jerk=jerk(ref))
+                     fastest_turn_deg_s=fastest_turn(heading)[0], jerk=jerk(ref))
 
 
 def score_sample(ref: Reference, sample: Track) -> dict:
@@ -223,8 +223,9 @@ def score_sample(ref: Reference, sample: Track) -> dict:
     floor_step = STEP_FLOOR * size
     skate, bob = planted_speeds_cm_s(sample, ref.contacts, codec.contact_speed, up, ref.floor, size)
     depth = ref.joint_floors - sample.positions[..., up]
-    turning = turning_rates(sample, ref.heading_axis, up)
-    spin, spin_frame = fastest_turn(sample, ref.heading_axis, up)
+    heading = headings(sample, ref.heading_axis, up)
+    turning = turning_rates(heading)
+    spin, spin_frame = fastest_turn(heading)
     below = depth > FLOOR_TOLERANCE
     scores = {
         "root_step_max_ratio": _ratio(steps.max(initial=0), max(ref.steps.max(initial=0), floor_step)),

@@ -30,6 +30,14 @@ ROOT_FRAMES = ("world", "heading")
 MOVING_SPEED = 0.1  # m/s: below this the root stands and its direction of travel means nothing
 
 
+def trajectory_rotation(codec):
+    """The feature block of the trajectory joint's rotation, None where it has none (no heading)."""
+    if codec.trajectory_joint is None:
+        return None
+    joint = codec.skeleton.names[codec.trajectory_joint]
+    return next((b for b in codec.layout.blocks if b.kind == "rotation" and b.joint == joint), None)
+
+
 @dataclass(frozen=True)
 class HeadingFrame:
     rotation: tuple[int, ...]  # the six feature channels of the trajectory joint's 6D rotation
@@ -42,10 +50,8 @@ class HeadingFrame:
 
     @classmethod
     def of(cls, codec, forward, start: float = 0.0) -> "HeadingFrame":
-        layout = codec.layout
-        joint = codec.skeleton.names[codec.trajectory_joint]
-        rotation = next(b for b in layout.blocks if b.kind == "rotation" and b.joint == joint)
-        dx, _, dz = layout.indices(("root",))
+        rotation = trajectory_rotation(codec)
+        dx, _, dz = codec.layout.indices(("root",))
         return cls(tuple(range(rotation.start, rotation.stop)), (int(dx), int(dz)), codec.horizontal_axes,
                    codec.height_axis, np.asarray(forward, dtype=np.float64), float(codec.fps), float(start))
 
@@ -91,30 +97,40 @@ def yaw(vectors: np.ndarray, up: int) -> np.ndarray:
     return np.arctan2(vectors[..., v], vectors[..., u])
 
 
-def travel_axis(rotations: np.ndarray, velocity: np.ndarray, up: int) -> np.ndarray:
+def moving_axis(rotations: np.ndarray, velocity: np.ndarray, up: int) -> np.ndarray | None:
     """(3,) the local axis of a joint ((T, 3, 3) rotations in its parent's frame, (T, 3)
-    velocities in m/s) along which it travels; for a joint that stands, its most horizontal axis."""
+    velocities in m/s) along which it travels; None for a joint that stands."""
     velocity = velocity.copy()
     velocity[:, up] = 0.0
     moving = np.linalg.norm(velocity, axis=-1) > MOVING_SPEED
-    if moving.mean() >= 0.2:
-        local = np.einsum("tba,tb->a", rotations[moving], velocity[moving])
-        if np.linalg.norm(local) > 1e-9:
-            return local / np.linalg.norm(local)
+    if moving.mean() < 0.2:
+        return None
+    local = np.einsum("tba,tb->a", rotations[moving], velocity[moving])
+    return local / np.linalg.norm(local) if np.linalg.norm(local) > 1e-9 else None
+
+
+def horizontal_axis(rotations: np.ndarray, up: int) -> np.ndarray:
+    """(3,) the local axis of a joint ((T, 3, 3) rotations) that lies the most horizontal."""
     world = np.einsum("tab,kb->tka", rotations, np.eye(3))
     return np.eye(3)[int(np.argmin(np.abs(world[..., up]).mean(axis=0)))]
 
 
+def travel_axis(rotations: np.ndarray, velocity: np.ndarray, up: int) -> np.ndarray:
+    """The axis a joint travels along (`moving_axis`), or for one that stands its most horizontal."""
+    axis = moving_axis(rotations, velocity, up)
+    return horizontal_axis(rotations, up) if axis is None else axis
+
+
 def clip_heading_frame(codec, features: np.ndarray) -> HeadingFrame:
     """The heading frame of a clip's (T, F) features: its travel axis and start heading."""
-    joint = codec.skeleton.names[codec.trajectory_joint]
-    block = next(b for b in codec.layout.blocks if b.kind == "rotation" and b.joint == joint)
-    rotations = sixd_to_matrix(np.asarray(features, dtype=np.float64)[:, block.start : block.stop])
+    features = np.asarray(features, dtype=np.float64)
+    block = trajectory_rotation(codec)
+    rotations = sixd_to_matrix(features[:, block.start : block.stop])
     dx, _, dz = codec.layout.indices(("root",))
     velocity = np.zeros((len(features), 3))
-    velocity[:, list(codec.horizontal_axes)] = np.asarray(features, dtype=np.float64)[:, [dx, dz]] * codec.fps
+    velocity[:, list(codec.horizontal_axes)] = features[:, [dx, dz]] * codec.fps
     frame = HeadingFrame.of(codec, travel_axis(rotations, velocity, codec.height_axis))
-    return HeadingFrame.of(codec, frame.forward, float(frame.headings(np.asarray(features, dtype=np.float64))[0]))
+    return HeadingFrame.of(codec, frame.forward, float(frame.headings(features)[0]))
 
 
 # --------------------------------------------------------------------------- guides
@@ -136,6 +152,7 @@ class GuidedHeading:
 
     def __init__(self, frame: HeadingFrame, reference: np.ndarray, keep: np.ndarray | None, region: np.ndarray | None):
         self.frame = frame
+        self._check(keep)
         features = np.moveaxis(np.asarray(reference, dtype=np.float64), -2, -1)  # (..., T, F)
         self.headings = frame.headings(features)  # (..., T): only wrapped differences of these count
         self.faces = np.abs(features[..., 0, list(frame.rotation)]).sum(axis=-1) > 0  # (...,) a pose at frame 0
@@ -157,7 +174,7 @@ class GuidedHeading:
         out[..., -1, :] = np.minimum(rotation, before)
         return out
 
-    def check(self, keep: np.ndarray | None) -> None:
+    def _check(self, keep: np.ndarray | None) -> None:
         """A velocity kept without the rotation it is turned by cannot be kept in this frame."""
         if keep is None:
             return

@@ -12,6 +12,7 @@ import numpy as np
 from .errors import ModelError, OptionError, SinMDMError
 from .features import MotionCodec
 from .graph_space import GraphSpace, graph_space
+from .heading import trajectory_rotation
 from .model_format import INPUT_NAMES, METADATA_KEY, OUTPUT_NAME, decode_metadata
 from .options import check_whole
 
@@ -64,7 +65,7 @@ class MotionModel:
 
     @property
     def graph_width(self) -> int:
-        return self.features + (self.metadata.get("heading_frame") is not None)
+        return self.graph_space.width
 
     @property
     def velocity_unit(self) -> str:
@@ -190,12 +191,9 @@ def _check_graph(denoiser: OnnxDenoiser, features: int, timesteps: int) -> None:
 
 def _graph_width(codec: MotionCodec, metadata: dict, path: Path) -> int:
     """The channels the graph sees: the features, and the turn rate of a heading-frame model."""
-    if metadata.get("heading_frame") is None:
-        return codec.width
-    joint = None if codec.trajectory_joint is None else codec.skeleton.names[codec.trajectory_joint]
-    if not any(b.kind == "rotation" and b.joint == joint for b in codec.layout.blocks):
+    if metadata.get("heading_frame") is not None and trajectory_rotation(codec) is None:
         raise ModelError(f"{path}: its metadata names a heading frame, but its trajectory joint has no rotation features")
-    return codec.width + 1
+    return graph_space(codec, metadata).width
 
 
 def load_model(paths: list[str | os.PathLike] | str | os.PathLike | None = None, threads: int | None = None,

@@ -283,7 +283,6 @@ def sample_features(
     heading = None
     if guide is not None and space.heading is not None:
         heading = GuidedHeading(space.heading, guide.reference, guide.keep, guide.harmonize)
-        heading.check(guide.keep)
         guide = Guide(heading.reference, heading.keep, heading.region, guide.factor)
     options, margin, denoise, schedule = plan_sampling(model, frames, options, loop)
     length = denoise.frames

@@ -21,7 +21,7 @@ from ..runtime.bvh import BVH, read_bvh
 from ..runtime.errors import SinMDMError
 from ..runtime.features import MotionCodec, build_codec
 from ..runtime.graph_space import graph_space
-from ..runtime.heading import ROOT_FRAMES, clip_heading_frame
+from ..runtime.heading import ROOT_FRAMES, HeadingFrame, clip_heading_frame, trajectory_rotation
 from ..runtime.schedule import NUM_TIMESTEPS
 from .checkpoint import (BEST, CHECKSUMS, CONFIG, LOG, RUN_FORMAT, STAGE_PREFIX, load_best, load_config,
                          load_state, log_records, nonfinite_tensor, save_run)
@@ -90,24 +90,24 @@ ROOT_FRAME_CHOICES = ROOT_FRAMES + ("auto",)
 AUTO_HEADING_DEG_S = 10.0
 
 
-def choose_root_frame(clip: ClipData, config: TrainConfig) -> tuple[str, str]:
-    """(frame, why) for `config.root_frame` on this clip."""
+def choose_root_frame(clip: ClipData, config: TrainConfig, heading: HeadingFrame | None) -> tuple[str, str]:
+    """(frame, why) for `config.root_frame` on this clip; `heading`: the clip's heading frame,
+    None where its trajectory joint has no rotation."""
     if config.root_frame not in ROOT_FRAME_CHOICES:
         raise SinMDMError(f"unknown root frame {config.root_frame!r}: use {', '.join(ROOT_FRAME_CHOICES)}")
-    codec = clip.codec
-    joint = None if codec.trajectory_joint is None else codec.skeleton.names[codec.trajectory_joint]
-    turnable = any(b.kind == "rotation" and b.joint == joint for b in codec.layout.blocks)
-    if config.root_frame != "auto":
-        if config.root_frame == "heading" and not turnable:
+    if config.root_frame == "heading":
+        if heading is None:
             raise SinMDMError("--root-frame heading needs a trajectory joint with rotation channels; this clip has none")
+        if config.foot_loss > 0:
+            raise SinMDMError("--foot-loss works on world-frame features: it cannot be combined with --root-frame heading")
+    if config.root_frame != "auto":
         return config.root_frame, "asked for"
-    if not turnable:
+    if heading is None:
         return "world", "auto: the clip has no trajectory joint with rotation channels"
     if config.foot_loss > 0:
         return "world", "auto: the foot-contact loss works on world-frame features"
-    features = np.asarray(clip.features, dtype=np.float64)
-    headings = clip_heading_frame(codec, features).headings(features)
-    rate = float(np.degrees(headings[-1] - headings[0]) / max((len(features) - 1) / codec.fps, 1e-9))
+    headings = heading.headings(np.asarray(clip.features, dtype=np.float64))
+    rate = float(np.degrees(headings[-1] - headings[0]) / max((len(headings) - 1) / clip.codec.fps, 1e-9))
     if abs(rate) > AUTO_HEADING_DEG_S:
         return "heading", f"auto: the clip turns {rate:+.1f} deg/s on average, more than {AUTO_HEADING_DEG_S:g}"
     return "world", f"auto: the clip turns {rate:+.1f} deg/s on average, not more than {AUTO_HEADING_DEG_S:g}"
@@ -116,13 +116,11 @@ def choose_root_frame(clip: ClipData, config: TrainConfig) -> tuple[str, str]:
 def graph_metadata(clip: ClipData, config: TrainConfig) -> dict:
     """How the model's graph sees the clip's features (runtime.graph_space), as its metadata says
     it, and why its root frame was chosen."""
-    frame, why = choose_root_frame(clip, config)
-    heading = None
-    if frame == "heading":
-        if config.foot_loss > 0:
-            raise SinMDMError("--foot-loss works on world-frame features: it cannot be combined with --root-frame heading")
-        heading = clip_heading_frame(clip.codec, clip.features).to_dict()
-    return {"velocity_unit": config.velocity_unit, "heading_frame": heading, "root_frame": {"frame": frame, "why": why}}
+    turnable = config.root_frame != "world" and trajectory_rotation(clip.codec) is not None
+    heading = clip_heading_frame(clip.codec, clip.features) if turnable else None
+    frame, why = choose_root_frame(clip, config, heading)
+    return {"velocity_unit": config.velocity_unit, "heading_frame": heading.to_dict() if frame == "heading" else None,
+            "root_frame": {"frame": frame, "why": why}}
 
 
 def load_clip(path: Path, fps: float, codec_options: dict) -> ClipData:
