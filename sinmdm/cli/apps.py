@@ -9,6 +9,7 @@ from typing import Annotated, Optional
 import typer
 
 from ..runtime import applications as apps
+from ..runtime.sampler import check_guide
 from .options import Context, Job, Ref, SourceFps, sampling_command
 
 Ramp = Annotated[int, typer.Option("--ramp", help="Frames of linear blend at each border.")]
@@ -20,6 +21,7 @@ Joints = Annotated[Optional[str], typer.Option("--joints", help="upper-body, low
 
 
 def _plan_job(context: Context, ref: Path, plan: "apps.Plan") -> Job:
+    check_guide(context.model, plan.guide)  # before the output folder exists
     return Job(plan.frames, lambda progress: apps.run_plan(context.model, plan, context.options, progress, context.force),
                summary={"reference": str(ref)})
 

@@ -141,6 +141,18 @@ def _wrapped(angle: np.ndarray) -> np.ndarray:
     return (angle + np.pi) % (2 * np.pi) - np.pi
 
 
+def check_keep(frame: HeadingFrame, keep: np.ndarray | None) -> None:
+    """A velocity kept without the rotation it is turned by cannot be kept in the heading frame."""
+    if keep is None:
+        return
+    keep = np.asarray(keep, dtype=np.float64)
+    rotation = keep[..., list(frame.rotation), :].min(axis=-2)
+    if any((keep[..., c, :] > rotation + 1e-9).any() for c in frame.velocity):
+        raise SinMDMError("this model sees motion from the character's heading (trained with --root-frame heading): "
+                          "a path without the reference's rotations cannot guide it; give a reference on the model's "
+                          "skeleton, or use a model trained with --root-frame world")
+
+
 class GuidedHeading:
     """An application's guide in the heading frame. A channel of the graph is kept where
     what it is made of is kept: the turned rotation where the trajectory joint's rotation
@@ -152,7 +164,7 @@ class GuidedHeading:
 
     def __init__(self, frame: HeadingFrame, reference: np.ndarray, keep: np.ndarray | None, region: np.ndarray | None):
         self.frame = frame
-        self._check(keep)
+        check_keep(frame, keep)
         features = np.moveaxis(np.asarray(reference, dtype=np.float64), -2, -1)  # (..., T, F)
         self.headings = frame.headings(features)  # (..., T): only wrapped differences of these count
         self.faces = np.abs(features[..., 0, list(frame.rotation)]).sum(axis=-1) > 0  # (...,) a pose at frame 0
@@ -173,18 +185,6 @@ class GuidedHeading:
         before = np.concatenate([rotation[..., :1] * 0.0, rotation[..., :-1]], axis=-1)
         out[..., -1, :] = np.minimum(rotation, before)
         return out
-
-    def _check(self, keep: np.ndarray | None) -> None:
-        """A velocity kept without the rotation it is turned by cannot be kept in this frame."""
-        if keep is None:
-            return
-        f = self.frame
-        keep = np.asarray(keep, dtype=np.float64)
-        rotation = keep[..., list(f.rotation), :].min(axis=-2)
-        if any((keep[..., c, :] > rotation + 1e-9).any() for c in f.velocity):
-            raise SinMDMError("this model sees motion from the character's heading (trained with --root-frame heading): "
-                              "a path without the reference's rotations cannot guide it; give a reference on the model's "
-                              "skeleton, or use a model trained with --root-frame world")
 
     def starts(self, x: np.ndarray) -> np.ndarray:
         """x (N, G, T) sampled in the graph's space (the guide's frames), its rates changed in

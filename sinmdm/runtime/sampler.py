@@ -25,7 +25,7 @@ import numpy as np
 
 from .errors import OptionError, SinMDMError
 from .graph_space import GraphSpace
-from .heading import GuidedHeading, close_the_turn
+from .heading import GuidedHeading, check_keep, close_the_turn
 from .model import MotionModel
 from .options import DEFAULT_STEPS, EDGE_MARGIN, SAMPLERS, SamplingOptions  # noqa: F401 (re-exported)
 from .schedule import Schedule
@@ -262,6 +262,12 @@ def plan_sampling(model: MotionModel, frames: int, options: SamplingOptions, loo
     margin = 0 if loop else options.margin
     denoise = WindowedDenoiser(model, frames + 2 * margin, options.hop, loop=loop)
     return options, margin, denoise, Schedule.from_alphas_cumprod(model.alphas_cumprod, options.steps)
+
+
+def check_guide(model: MotionModel, guide: Guide) -> None:
+    """Refuse, before any work, a guide the model's graph space cannot carry."""
+    if model.graph_space.heading is not None:
+        check_keep(model.graph_space.heading, guide.keep)
 
 
 def sample_features(
