@@ -217,3 +217,16 @@ def test_smoothing_is_kept_where_it_calms_jittery_samples_for_little_diversity()
     assert choose_sampling(None, costly, 64)["smooth"] == 0.0
     steady = _FixedScores({"default": (100.0, 1.35, 1.80), (10, 48, 1.0): (99.9, 1.32, 1.10)})  # not jittery: balance rules
     assert choose_sampling(None, steady, 64)["smooth"] == 0.0
+
+
+def test_checks_as_sampled_score_a_shaking_checkpoint_as_calibration_will_smooth_it():
+    # Xia proud's checks with the cleanup: step 200 at 100 / 1.34 shook 3.4x the clip (balance 0.88) and lost
+    # to step 400 at 100 / 1.17 / 2.6x (0.90); smoothed as calibration smooths, step 200 is the better one
+    shaking = _FixedScores({"default": (100.0, 1.344, 3.405), (None, None, SMOOTH_CANDIDATES[0]): (100.0, 1.31, 1.8)})
+    step_200 = ClipScorer.check_as_sampled(shaking, None)
+    assert step_200["smooth"] == SMOOTH_CANDIDATES[0] and step_200["balance"] > 1.0
+    step_400 = ClipScorer.check_as_sampled(_FixedScores({"default": (100.0, 1.165, 2.557)}), None)
+    assert step_400["smooth"] == 0.0 and step_200["balance"] > step_400["balance"]
+    # smoothing that costs the balance and 0.4 of diversity is not what calibration keeps: the raw scores stand
+    costly = _FixedScores({"default": (100.0, 1.6, 3.1), (None, None, SMOOTH_CANDIDATES[0]): (100.0, 1.2, 1.8)})
+    assert ClipScorer.check_as_sampled(costly, None)["smooth"] == 0.0

@@ -126,6 +126,20 @@ class ClipScorer:
         result = generate(model, self.frames, options)
         return {**self.score(result.clips), "check_seconds": round(time.perf_counter() - began, 2)}
 
+    def check_as_sampled(self, model: MotionModel, steps: int | None = None, hop: int | None = None) -> dict:
+        """`check`, and where its samples shake past JITTER_LIMIT, the same samples smoothed by
+        SMOOTH_CANDIDATES[0] when calibration would keep that smoothing (`smoothing_kept`): the
+        balance of what the checkpoint gives once calibrated, not of its raw samples. Without it
+        an early checkpoint that shakes loses to a later one that copies, though one frame of
+        smoothing would calm it (Xia proud, BENCHMARKS.md)."""
+        raw = {**self.check(model, steps, hop), "smooth": 0.0}
+        if raw["jitter_ratio"] <= JITTER_LIMIT:
+            return raw
+        sigma = SMOOTH_CANDIDATES[0]
+        smoothed = {**self.check(model, steps, hop, smooth=sigma), "smooth": sigma}
+        smoothed["check_seconds"] = round(raw["check_seconds"] + smoothed["check_seconds"], 2)
+        return smoothed if smoothing_kept(raw, smoothed) else raw
+
     def score(self, clips: list[BVH]) -> dict:
         features = [eval_features(c, self.protocol) for c in clips]
         paper = metrics.evaluate(self.reference_features, features)
@@ -147,6 +161,16 @@ class ClipScorer:
         return scores
 
 
+def smoothing_kept(before: dict, smoothed: dict, unsmoothed_balance: float | None = None) -> bool:
+    """Whether smoothing is worth keeping: the balance holds (within BALANCE_TOLERANCE of the
+    unsmoothed setting's), or it calms samples judged jittery for at most SMOOTH_DIVERSITY_COST
+    of global diversity; never when the smoothed samples teleport."""
+    reference = before["balance"] if unsmoothed_balance is None else unsmoothed_balance
+    calmed = (before["jitter_ratio"] > JITTER_RATIO >= smoothed["jitter_ratio"]
+              and smoothed["global_diversity"] >= before["global_diversity"] - SMOOTH_DIVERSITY_COST)
+    return keepable(smoothed) and (smoothed["balance"] >= reference - BALANCE_TOLERANCE or calmed)
+
+
 def choose_sampling(model: MotionModel, scorer: ClipScorer, window: int) -> dict:
     """Try SAMPLING_CANDIDATES on `model` (the scorer's seeds), choose the cheapest that
     keeps the balance, then SMOOTH_CANDIDATES on it while its samples shake more than the
@@ -165,9 +189,7 @@ def choose_sampling(model: MotionModel, scorer: ClipScorer, window: int) -> dict
             break
         smoothed = {**chosen, "smooth": sigma, **scorer.check(model, steps=chosen["steps"], hop=chosen["hop"], smooth=sigma)}
         trials.append(smoothed)
-        calmed = (chosen["jitter_ratio"] > JITTER_RATIO >= smoothed["jitter_ratio"]
-                  and smoothed["global_diversity"] >= chosen["global_diversity"] - SMOOTH_DIVERSITY_COST)
-        if (smoothed["balance"] < unsmoothed - BALANCE_TOLERANCE and not calmed) or not keepable(smoothed):
+        if not smoothing_kept(chosen, smoothed, unsmoothed):
             break
         chosen = smoothed
     return {"steps": chosen["steps"], "hop": chosen["hop"], "smooth": chosen["smooth"], "scores": {k: chosen[k] for k in (

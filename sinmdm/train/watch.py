@@ -10,8 +10,10 @@ Balance (`sinmdm.eval.balance`) = min(coverage / 95, global diversity / 1.3, 3 /
 ratio): a copying model and a drifting one both lose to the paper's own row. A check whose
 samples teleport is never kept.
 
-The checks always use the same seeds, so two checks differ by the weights only, and
-sample without the foot cleanup: they judge the weights, not the post-process.
+The checks always use the same seeds, so two checks differ by the weights only. By default
+they sample without the foot cleanup: they judge the weights, not the post-process. With
+`CheckSettings.cleanup` they judge what `sample` will give: the cleanup on, and samples that
+shake past the balance's limit smoothed where calibration would smooth them.
 """
 
 from __future__ import annotations
@@ -69,7 +71,10 @@ class QualityWatch:
               hop: int | None = None) -> dict:
         """Scores of samples from `module` (eval mode is restored to what it was)."""
         with _evaluating(module):
-            return self.scorer.check(self.model(module, device), steps, hop)
+            model = self.model(module, device)
+            if self.scorer.settings.cleanup:
+                return self.scorer.check_as_sampled(model, steps, hop)
+            return self.scorer.check(model, steps, hop)
 
 
 @contextmanager
