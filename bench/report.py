@@ -243,6 +243,62 @@ def root_frame_table(date: str = "2026-12-06") -> str:
     return "\n".join(lines) + "\n"
 
 
+# The latest run of the `cpu` recipe with checks that sample without the cleanup, per clip tag
+# (the walk: the heading frame that `--root-frame auto` picks for it).
+WITHOUT_CLEANUP_RUNS = {"Joe_Walk-In-Circle": "watched_heading_2026-12-06",
+                        "Joe_Walk-In-Circle-static-root-z-up": "watched_heading_2026-12-06",
+                        "Crabnew_Crab-dance-long": "watched_world_2026-12-06"}
+
+
+def as_sampled_table(name: str = "watched_as_sampled_2026-12-07") -> str:
+    """The `cpu` recipe with checks that sample as `sample` does (cleanup, and the calibrated
+    smoothing of shaking samples) beside its latest run with checks without the cleanup and
+    the 2026-12-06 checks with the cleanup alone: kept step, wall, default sampler scores."""
+    entries = results(name)
+    if entries is None:
+        return "(no as-sampled results yet)\n"
+    lines = header("clip", "checks", "kept step (of)", "train wall", "checks' share of it", "coverage %", "global div",
+                   "local div", "turning distance deg/s (allowed)", "jitter (x clip)", "smoothing", "plausible")
+    for entry in entries:
+        arms = [("without cleanup", next((e for e in results(WITHOUT_CLEANUP_RUNS.get(entry["tag"], "watched_compiled_2026-12-06"))
+                                          or [] if e["tag"] == entry["tag"]), None)),
+                ("cleanup (2026-12-06)", next((e for e in results("watched_check_cleanup_2026-12-06") or []
+                                               if e["tag"] == entry["tag"]), None)),
+                ("**as sampled**", entry)]
+        for label, arm in arms:
+            row = arm and next((r for r in arm["rows"] if r["variant"] == "default"), None)
+            if not row:
+                continue
+            a = row.get("plausibility") or {}
+            allowed = max(10.0, 2 * a["clip_turning_halves_deg_s"]) if "clip_turning_halves_deg_s" in a else None
+            lines.append(
+                f"| {entry['tag']} | {label} | {arm['kept_step']} ({arm['train_steps']}) | {_duration(arm['train_wall_seconds'])} "
+                f"| {100 * arm['check_seconds'] / arm['train_seconds']:.0f} % | {fmt(row['coverage'], 1)} "
+                f"| {fmt(row['global_diversity'])} | {fmt(row['local_diversity'])} "
+                f"| {fmt(a.get('turning_distance_deg_s'), 1)} ({fmt(allowed, 1)}) | {fmt(a.get('jitter_ratio'), 1)} "
+                f"| {fmt((arm.get('sampling_chosen') or {}).get('smooth'), 0)} "
+                f"| {row['samples'] - a.get('implausible', 0)}/{row['samples']} |")
+    return "\n".join(lines) + "\n"
+
+
+def as_sampled_curve_table(name: str = "watched_as_sampled_2026-12-07") -> str:
+    """The quality curve of the as-sampled runs; `s` marks a check scored with 1 frame of smoothing."""
+    entries = results(name)
+    if entries is None:
+        return "(no as-sampled results yet)\n"
+    lines = header("clip", "step: coverage % / global div / jitter (balance); s = smoothed, * = kept")
+    for entry in entries:
+        cells, stage = [], None
+        for c in entry["checks"]:
+            if c.get("stage") != stage:
+                stage = c.get("stage")
+                cells.append(f"**then {stage}:**")
+            cells.append(f"{c['step']}: {fmt(c['coverage'], 0)} / {fmt(c['global_diversity'])} / {fmt(c['jitter_ratio'], 1)}x"
+                         f"{' s' if c.get('smooth') else ''} ({fmt(c['balance'])})" + ("*" if c["step"] == entry["kept_step"] else ""))
+        lines.append(f"| {entry['tag']} | {'; '.join(cells).replace(':**;', ':**')} |")
+    return "\n".join(lines) + "\n"
+
+
 def turning_table(name: str = "turning_2026-12-06") -> str:
     """bench/turning.py: turning within one window and at the joins of windows, per model."""
     entries = results(name)
@@ -344,6 +400,7 @@ def contact_floors_table(date: str = "2026-12-06") -> str:
 TABLES = {"WATCHED_TABLE": watched_table, "WATCHED_1206_TABLE": lambda: watched_table("watched_2026-12-06", jitter=True),
           "WATCHED_COMPILED_TABLE": lambda: watched_table("watched_compiled_2026-12-06", jitter=True),
           "ROOT_FRAME_TABLE": root_frame_table, "TURNING_TABLE": turning_table,
+          "AS_SAMPLED_TABLE": as_sampled_table, "AS_SAMPLED_CURVE_TABLE": as_sampled_curve_table,
           "WATCHED_COMPILED_4000_TABLE": lambda: watched_table("watched_compiled_4000_2026-12-06", jitter=True), "WATCHED_CURVE_TABLE": watched_curve_table, "LAYOUTS_TABLE": layouts_table,
           "LAYOUTS_1205_TABLE": lambda: layouts_table("layouts_2026-12-05"),
           "LAYOUTS_1206_TABLE": lambda: layouts_table("layouts_2026-12-06"), "SMOOTHING_TABLE": smoothing_table, "CONTACT_FLOORS_TABLE": contact_floors_table,

@@ -11,6 +11,7 @@ import pytest
 from sinmdm.eval.plausibility import plausibility
 from sinmdm.runtime.animation import Animation, animation_from_bvh, animation_to_bvh
 from sinmdm.runtime.bvh import BVH, read_bvh, write_bvh
+from sinmdm.runtime.features import build_codec
 from sinmdm.runtime.rotations import axis_matrix
 
 from .conftest import real_clip, run_cli
@@ -170,3 +171,20 @@ def test_a_spin_is_named_with_its_frame(walk):
     row = plausibility(walk, [_turned_round(walk, at=300, frames=6)])["samples"][0]  # 60 fps: 0.1 s
     assert row["fastest_turn_deg_s"] > 5 * row["clip_fastest_turn_deg_s"]
     assert row["verdict"].startswith("spins") and "frame 15" in row["verdict"]  # at 30 fps, ends by frame 153-158
+
+
+def _slowed(clip: BVH, factor: float) -> BVH:
+    """The clip with its root's travel over the ground scaled by `factor` (the same gait, shorter strides)."""
+    up = build_codec(clip).up_axis
+    values = np.array(clip.values, dtype=np.float64)
+    for axis in (a for a in range(3) if a != up):  # the root's position channels come first in these files
+        values[:, axis] = values[0, axis] + factor * (values[:, axis] - values[0, axis])
+    return BVH(clip.skeleton, clip.frame_time, values, clip.path)
+
+
+def test_a_walk_that_travels_slower_than_the_clip_is_named(walk):
+    """The early walk checkpoint's flaw: 0.66 m/s against the clip's 0.87 at full coverage (BENCHMARKS.md)."""
+    row = plausibility(walk, [_slowed(walk, 0.75)])["samples"][0]
+    assert row["clip_pace_m_s"] == pytest.approx(0.87, abs=0.03) and row["pace_m_s"] == pytest.approx(0.65, abs=0.03)
+    assert row["verdict"].startswith("travels slower than the clip") and row["pace_distance_m_s"] > 0.15
+    assert plausibility(walk, [_slowed(walk, 0.95)])["samples"][0]["verdict"] == "plausible"  # within 15 % of the pace

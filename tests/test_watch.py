@@ -203,7 +203,7 @@ class _FixedScores:
     def check(self, model, steps=None, hop=None, smooth=0.0) -> dict:
         coverage, diversity, jitter = self.table.get((steps, hop, smooth), self.table["default"])
         return {"coverage": coverage, "global_diversity": diversity, "local_diversity": diversity, "jitter_ratio": jitter,
-                "turning_distance_deg_s": 0.0, "root_step_max_ratio": 1.0, "eval_preset": "mixamo24", "check_seconds": 0.0,
+                "turning_distance_deg_s": 0.0, "turning_allowed_deg_s": 10.0, "root_step_max_ratio": 1.0, "eval_preset": "mixamo24", "check_seconds": 0.0,
                 "balance": balance(coverage, diversity, jitter)}
 
 
@@ -227,6 +227,8 @@ def test_checks_as_sampled_score_a_shaking_checkpoint_as_calibration_will_smooth
     assert step_200["smooth"] == SMOOTH_CANDIDATES[0] and step_200["balance"] > 1.0
     step_400 = ClipScorer.check_as_sampled(_FixedScores({"default": (100.0, 1.165, 2.557)}), None)
     assert step_400["smooth"] == 0.0 and step_200["balance"] > step_400["balance"]
+    # a check that could not beat the best even with calm samples is not sampled twice
+    assert ClipScorer.check_as_sampled(shaking, None, to_beat=1.2)["smooth"] == 0.0
     # smoothing that costs the balance and 0.4 of diversity is not what calibration keeps: the raw scores stand
     costly = _FixedScores({"default": (100.0, 1.6, 3.1), (None, None, SMOOTH_CANDIDATES[0]): (100.0, 1.2, 1.8)})
     assert ClipScorer.check_as_sampled(costly, None)["smooth"] == 0.0

@@ -66,6 +66,8 @@ def _table(result: dict, reference: Path) -> Table:
 PLAUSIBILITY = (
     ("root_step_max_ratio", "largest root step / clip's", None),
     ("speed_distance_m_s", "root speed distance (m/s)", None),
+    ("pace_m_s", "pace: travel per second (m/s)", "clip_pace_m_s"),
+    ("pace_distance_m_s", "pace distance (m/s)", None),
     ("backward_share", "frames walking backwards", "clip_backward_share"),
     ("turning_deg_s", "turning (deg/s, + left)", "clip_turning_deg_s"),
     ("turning_distance_deg_s", "turning distance (deg/s)", None),
@@ -91,6 +93,8 @@ def _print_plausibility(console: Console, plausible: dict | None, samples: list[
             clip += f" (halves up to {aggregate['clip_backward_half_max']:.2f})"
         if key == "turning_distance_deg_s":
             clip += f" (halves {aggregate['clip_turning_halves_deg_s']:.2f})"
+        if key == "pace_distance_m_s":
+            clip += f" (halves {aggregate['clip_pace_halves_m_s']:.2f})"
         table.add_row(label, f"{aggregate[key]:.2f}", clip)
     console.print(table)
     for path, row in zip(samples, plausible["samples"]):

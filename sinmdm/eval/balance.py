@@ -3,7 +3,7 @@ chosen by it. Numpy only: the training watch scores torch weights with it, `sinm
 calibrate` an exported model.
 
 Balance = min(coverage / 95, global diversity / 1.3, 3 / jitter ratio, allowed turning / turning
-distance): every term must hold, so a
+distance, allowed pace / pace distance): every term must hold, so a
 copying model (coverage 100, diversity 1.0: 0.77) and a drifting one (coverage 75,
 diversity 1.9: 0.79) both lose to the paper's own row (98.1 / 1.55: 1.03). Unlike the
 paper's harmonic mean, extra diversity cannot buy back lost coverage, and neither can
@@ -14,7 +14,9 @@ plausibility verdict's (its floor, or twice what the clip's halves differ by, ov
 between the samples' and the clip's heading change per second): a walk in a circle whose samples
 go straight or spin is not in balance, whatever its coverage (the heading-frame walk's frame-norm
 check at 100 % / 1.73 turned 15.9 deg/s away from the clip: 0.63, below its GroupNorm check at
-100 % / 1.30 / 8.1 deg/s: 1.00; BENCHMARKS.md, "Turning"). Samples that teleport
+100 % / 1.30 / 8.1 deg/s: 1.00; BENCHMARKS.md, "Turning"). The pace term is the same for the
+distance travelled per second: an early walk checkpoint whose cleaned, smoothed samples scored
+100 % / 1.38 walked 0.21 m/s slower than the clip (allowed: 0.13). Samples that teleport
 (the root jumps more than 1.5x the clip's largest step) are never kept.
 """
 
@@ -30,7 +32,8 @@ from ..runtime.model import MotionModel
 from ..runtime.options import SamplingOptions
 from . import metrics
 from .motion_features import MIXAMO24_JOINTS, eval_features, protocol_for, resolve_joints
-from .plausibility import JITTER_RATIO, TELEPORT_RATIO, TURN_FLOOR_DEG_S, plausibility, turning_allowed
+from .plausibility import (JITTER_RATIO, PACE_FLOOR_M_S, TELEPORT_RATIO, TURN_FLOOR_DEG_S, pace_allowed, plausibility,
+                           turning_allowed)
 
 COVERAGE_BAND = 95.0  # % : below this the model drifts from the clip
 DIVERSITY_BAND = 1.3  # global diversity: below this the model copies
@@ -64,20 +67,31 @@ SMOOTH_DIVERSITY_COST = 0.05
 
 
 def balance(coverage: float, global_diversity: float, jitter_ratio: float | None = None,
-            turning_distance: float | None = None, turning_allowed: float = TURN_FLOOR_DEG_S) -> float:
-    """The weakest of the band ratios, jitter's and turning's included when they are known."""
+            turning_distance: float | None = None, turning_allowed: float = TURN_FLOOR_DEG_S,
+            pace_distance: float | None = None, pace_allowed: float = PACE_FLOOR_M_S) -> float:
+    """The weakest of the band ratios, jitter's, turning's and pace's included when they are known."""
     ratios = [coverage / COVERAGE_BAND, global_diversity / DIVERSITY_BAND]
     if jitter_ratio:
         ratios.append(JITTER_LIMIT / jitter_ratio)
     if turning_distance:
         ratios.append(turning_allowed / turning_distance)
+    if pace_distance:
+        ratios.append(pace_allowed / pace_distance)
     return float(min(ratios))
+
+
+def scores_balance(scores: dict, jitter: bool = True) -> float:
+    """`balance` of a scores dict (`ClipScorer.score`); `jitter=False`: as if the samples were calm."""
+    return balance(scores["coverage"], scores["global_diversity"], scores["jitter_ratio"] if jitter else None,
+                   scores.get("turning_distance_deg_s"), scores.get("turning_allowed_deg_s", TURN_FLOOR_DEG_S),
+                   scores.get("pace_distance_m_s"), scores.get("pace_allowed_m_s", PACE_FLOOR_M_S))
 
 
 def in_band(scores: dict) -> bool:
     return (scores["coverage"] >= COVERAGE_BAND and scores["global_diversity"] >= DIVERSITY_BAND
             and scores.get("jitter_ratio", 0.0) <= JITTER_LIMIT
-            and scores.get("turning_distance_deg_s", 0.0) <= scores.get("turning_allowed_deg_s", TURN_FLOOR_DEG_S))
+            and scores.get("turning_distance_deg_s", 0.0) <= scores.get("turning_allowed_deg_s", TURN_FLOOR_DEG_S)
+            and scores.get("pace_distance_m_s", 0.0) <= scores.get("pace_allowed_m_s", PACE_FLOOR_M_S))
 
 
 def keepable(scores: dict) -> bool:
@@ -126,14 +140,17 @@ class ClipScorer:
         result = generate(model, self.frames, options)
         return {**self.score(result.clips), "check_seconds": round(time.perf_counter() - began, 2)}
 
-    def check_as_sampled(self, model: MotionModel, steps: int | None = None, hop: int | None = None) -> dict:
+    def check_as_sampled(self, model: MotionModel, steps: int | None = None, hop: int | None = None,
+                         to_beat: float | None = None) -> dict:
         """`check`, and where its samples shake past JITTER_LIMIT, the same samples smoothed by
         SMOOTH_CANDIDATES[0] when calibration would keep that smoothing (`smoothing_kept`): the
         balance of what the checkpoint gives once calibrated, not of its raw samples. Without it
         an early checkpoint that shakes loses to a later one that copies, though one frame of
-        smoothing would calm it (Xia proud, BENCHMARKS.md)."""
+        smoothing would calm it (Xia proud, BENCHMARKS.md). The smoothed pass is skipped where
+        even calm samples could not beat `to_beat` (the best balance so far): smoothing only lifts
+        the jitter term."""
         raw = {**self.check(model, steps, hop), "smooth": 0.0}
-        if raw["jitter_ratio"] <= JITTER_LIMIT:
+        if raw["jitter_ratio"] <= JITTER_LIMIT or (to_beat is not None and scores_balance(raw, jitter=False) <= to_beat):
             return raw
         sigma = SMOOTH_CANDIDATES[0]
         smoothed = {**self.check(model, steps, hop, smooth=sigma), "smooth": sigma}
@@ -154,10 +171,12 @@ class ClipScorer:
             "jitter_ratio": round(float(aggregate.get("jitter_ratio", 0.0)), 3),
             "turning_distance_deg_s": round(float(aggregate.get("turning_distance_deg_s", 0.0)), 2),
             "turning_allowed_deg_s": round(turning_allowed(aggregate.get("clip_turning_halves_deg_s", 0.0)), 2),
+            "pace_distance_m_s": round(float(aggregate.get("pace_distance_m_s", 0.0)), 3),
+            "pace_allowed_m_s": round(pace_allowed(aggregate.get("clip_pace_m_s", 0.0),
+                                                   aggregate.get("clip_pace_halves_m_s", 0.0)), 3),
             "implausible": int(aggregate.get("implausible", 0)),
         }
-        scores["balance"] = round(balance(scores["coverage"], scores["global_diversity"], scores["jitter_ratio"],
-                                          scores["turning_distance_deg_s"], scores["turning_allowed_deg_s"]), 4)
+        scores["balance"] = round(scores_balance(scores), 4)
         return scores
 
 
@@ -193,4 +212,5 @@ def choose_sampling(model: MotionModel, scorer: ClipScorer, window: int) -> dict
             break
         chosen = smoothed
     return {"steps": chosen["steps"], "hop": chosen["hop"], "smooth": chosen["smooth"], "scores": {k: chosen[k] for k in (
-        "coverage", "global_diversity", "local_diversity", "jitter_ratio", "turning_distance_deg_s", "balance", "eval_preset")}, "trials": trials}
+        "coverage", "global_diversity", "local_diversity", "jitter_ratio", "turning_distance_deg_s", "pace_distance_m_s",
+        "balance", "eval_preset") if k in chosen}, "trials": trials}

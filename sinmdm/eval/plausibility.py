@@ -1,8 +1,9 @@
 """Plausibility: what an animator sees and the paper's metrics cannot (they read
 rotations and contact bits, not root motion). Per sample, against the clip, at
 30 fps in metres: root steps (teleports), speed distribution, walking against the
-facing direction, turning and spinning (how fast the character's heading changes,
-over a second and at its fastest, against the clip's), foot skating and bobbing (horizontal and vertical speed of planted feet),
+facing direction, pace (how far the character travels in a second, against the clip), turning
+and spinning (how fast the character's heading changes, over a second and at its fastest,
+against the clip's), foot skating and bobbing (horizontal and vertical speed of planted feet),
 floor penetration and jitter, and a one-line verdict (bobbing is reported, not
 judged: the cleanup holds ankles, not toes, at their height).
 
@@ -38,6 +39,14 @@ JITTER_RATIO = 2.0
 TURN_WINDOW_S = 1.0
 TURN_FLOOR_DEG_S = 10.0
 TURN_HALVES_FACTOR = 2.0
+# Pace: the distance between the sample's and the clip's distributions of travel per second (the
+# trajectory joint's horizontal displacement over 1 s windows: the sway within a step cancels).
+# Beyond the floor, a share of the clip's own pace, or twice what the clip's halves differ by, the
+# character walks visibly slower or faster than the clip: an early walk checkpoint travelled 0.66 m/s
+# against the clip's 0.87 with shorter strides, at 100 % coverage and 1.38 global diversity
+# (BENCHMARKS.md, "Checks that sample as `sample` does").
+PACE_WINDOW_S = 1.0
+PACE_FLOOR_M_S, PACE_SHARE, PACE_HALVES_FACTOR = 0.1, 0.15, 2.0
 # Spinning: the fastest heading change over SPIN_WINDOW_S, against the clip's fastest. Where windows
 # of different headings meet, a world-frame walk whipped round at 200-800 deg/s (its clip: 82).
 SPIN_WINDOW_S = 0.25
@@ -97,6 +106,16 @@ def turning_rates(heading: np.ndarray, window_s: float = TURN_WINDOW_S) -> np.nd
     if len(heading) <= frames:
         return np.zeros(0)
     return np.degrees(heading[frames:] - heading[:-frames]) / (frames / FPS)
+
+
+def paces(t: Track, up: int, window_s: float = PACE_WINDOW_S) -> np.ndarray:
+    """Horizontal displacement of the trajectory joint over each `window_s` window, in m/s;
+    empty for a motion shorter than a window."""
+    frames = max(int(round(window_s * FPS)), 1)
+    if len(t.positions) <= frames:
+        return np.zeros(0)
+    ground = t.positions[:, 0][:, _horizontal(up)]
+    return np.linalg.norm(ground[frames:] - ground[:-frames], axis=-1) / (frames / FPS)
 
 
 def fastest_turn(heading: np.ndarray) -> tuple[float, int]:
@@ -188,6 +207,8 @@ class Reference:
     forward: np.ndarray | None
     steps: np.ndarray  # (T-1,) root step per frame, metres
     speeds: np.ndarray  # (T-1,) horizontal root speed, m/s
+    paces: np.ndarray  # (windows,) travel per second, m/s
+    pace_halves_m_s: float  # distance between the clip's own halves' paces
     skating_cm_s: float
     bob_cm_s: float
     backward_share: float
@@ -208,8 +229,10 @@ def reference_figures(ref: Track, codec: MotionCodec, contacts: list[int]) -> Re
     heading = headings(ref, axis, up)
     turning = turning_rates(heading)
     half = len(turning) // 2
+    pace = paces(ref, up)
     return Reference(codec=codec, contacts=contacts, floor=floor, joint_floors=joint_floors(ref, floor, up),
-                     forward=forward, steps=root_steps(ref), speeds=_speeds(ref, up), skating_cm_s=skating, bob_cm_s=bob,
+                     forward=forward, steps=root_steps(ref), speeds=_speeds(ref, up), paces=pace,
+                     pace_halves_m_s=wasserstein_1d(pace[:len(pace) // 2], pace[len(pace) // 2:]), skating_cm_s=skating, bob_cm_s=bob,
                      backward_share=backward_share(ref, forward, up),
                      backward_half_max=most_backward_half(ref, forward, up), heading_axis=axis, turning=turning,
                      turning_halves_deg_s=wasserstein_1d(turning[:half], turning[half:]),
@@ -226,6 +249,7 @@ def score_sample(ref: Reference, sample: Track) -> dict:
     heading = headings(sample, ref.heading_axis, up)
     turning = turning_rates(heading)
     spin, spin_frame = fastest_turn(heading)
+    pace = paces(sample, up)
     below = depth > FLOOR_TOLERANCE
     scores = {
         "root_step_max_ratio": _ratio(steps.max(initial=0), max(ref.steps.max(initial=0), floor_step)),
@@ -234,6 +258,10 @@ def score_sample(ref: Reference, sample: Track) -> dict:
         "worst_step_frame": int(steps.argmax()) + 1 if len(steps) else 0,
         "worst_step_contrast": step_contrast(steps, int(steps.argmax())) if len(steps) else 1.0,
         "speed_distance_m_s": wasserstein_1d(_speeds(sample, up), ref.speeds),
+        "pace_m_s": float(pace.mean()) if len(pace) else 0.0,
+        "clip_pace_m_s": float(ref.paces.mean()) if len(ref.paces) else 0.0,
+        "clip_pace_halves_m_s": ref.pace_halves_m_s,
+        "pace_distance_m_s": wasserstein_1d(pace, ref.paces),
         "backward_share": backward_share(sample, ref.forward, up),
         "clip_backward_share": ref.backward_share,
         "clip_backward_half_max": ref.backward_half_max,
@@ -266,6 +294,11 @@ def turning_allowed(clip_halves_deg_s: float) -> float:
     return max(TURN_FLOOR_DEG_S, TURN_HALVES_FACTOR * clip_halves_deg_s)
 
 
+def pace_allowed(clip_pace_m_s: float, clip_halves_m_s: float) -> float:
+    """Metres per second a sample's pace may be from the clip's before it is a flaw."""
+    return max(PACE_FLOOR_M_S, PACE_SHARE * clip_pace_m_s, PACE_HALVES_FACTOR * clip_halves_m_s)
+
+
 def verdict(s: dict) -> str:
     if s["root_step_max_ratio"] > TELEPORT_RATIO:
         if s.get("worst_step_contrast", np.inf) > JUMP_CONTRAST:
@@ -284,6 +317,10 @@ def verdict(s: dict) -> str:
     if s.get("turning_distance_deg_s", 0.0) > turning_allowed(s.get("clip_turning_halves_deg_s", 0.0)):
         return (f"turns unlike the clip: {round(s['turning_deg_s']):+d} deg/s on average (clip: {round(s['clip_turning_deg_s']):+d}), "
                 f"{s['turning_distance_deg_s']:.0f} deg/s apart")
+    if s.get("pace_distance_m_s", 0.0) > pace_allowed(s.get("clip_pace_m_s", 0.0), s.get("clip_pace_halves_m_s", 0.0)):
+        pace, clip_pace = s["pace_m_s"], s["clip_pace_m_s"]
+        return (f"travels {'slower' if pace < clip_pace else 'faster'} than the clip: {pace:.2f} m/s over a second "
+                f"(clip: {clip_pace:.2f}), {s['pace_distance_m_s']:.2f} m/s apart")
     if s["penetration_cm"] > PENETRATION_CM:
         return f"sinks {s['penetration_cm']:.0f} cm into the floor on {_percent(s['penetration_share'])} of frames"
     if s["foot_skating_cm_s"] > SKATING_RATIO * s["clip_foot_skating_cm_s"] + SKATING_SLACK_CM_S:
@@ -308,11 +345,14 @@ def plausibility(reference: BVH, samples: list[BVH], units: str | float = "auto"
         "root_step_max_ratio": max(r["root_step_max_ratio"] for r in rows),
         "fastest_turn_deg_s": max(r["fastest_turn_deg_s"] for r in rows),
         **{k: float(np.mean([r[k] for r in rows])) for k in (
-            "root_step_p99_ratio", "speed_distance_m_s", "backward_share", "turning_distance_deg_s",
+            "root_step_p99_ratio", "speed_distance_m_s", "pace_m_s", "pace_distance_m_s", "backward_share",
+            "turning_distance_deg_s",
             "turning_deg_s", "foot_skating_cm_s",
             "foot_bob_cm_s", "penetration_cm", "penetration_share", "jitter_ratio")},
         "clip_backward_share": rows[0]["clip_backward_share"],
         "clip_backward_half_max": rows[0]["clip_backward_half_max"],
+        "clip_pace_m_s": rows[0]["clip_pace_m_s"],
+        "clip_pace_halves_m_s": rows[0]["clip_pace_halves_m_s"],
         "clip_turning_deg_s": rows[0]["clip_turning_deg_s"],
         "clip_turning_halves_deg_s": rows[0]["clip_turning_halves_deg_s"],
         "clip_fastest_turn_deg_s": rows[0]["clip_fastest_turn_deg_s"],

@@ -32,7 +32,9 @@ class TrainConfig:
     patience: int = 3
     early_stop: bool = True
     fallback_norm: str | None = None  # a run that stops COPYING spends its remaining steps on this norm
-    check_cleanup: bool = False  # checks sample with the foot cleanup (what `sample` gives) instead of without
+    # checks sample as `sample` will: the foot cleanup on, shaking samples smoothed where calibration would
+    # smooth them (eval.balance.ClipScorer.check_as_sampled); False: raw samples, no cleanup
+    check_cleanup: bool = False
     foot_loss: float = 0.0  # weight of the foot-contact loss (train/foot_loss.py; 0 = the paper's loss alone)
     velocity_unit: str = "frame"  # the root velocity channels in metres per "frame" (paper) or "second" (runtime.features.model_scale)
     # the trajectory joint seen in the "world" (paper) or from its "heading" (runtime.heading);
@@ -70,6 +72,7 @@ PRESETS = {
         check_every=200,
         fallback_norm="frame",
         root_frame="auto",
+        check_cleanup=True,
     ),
 }
 

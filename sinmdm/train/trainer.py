@@ -481,7 +481,7 @@ def _check(run: Run, watch: QualityWatch, log, on_check) -> dict | None:
     the budget was forced)."""
     tick = time.perf_counter()
     weights = run.ema if run.ema is not None else run.model
-    scores = watch.check(weights, run.device)
+    scores = watch.check(weights, run.device, to_beat=run.watch.best["balance"] if run.watch.best else None)
     best = None
     if run.watch.update(run.step, scores):
         best = {"step": run.step, "weights": copy.deepcopy(weights.state_dict()), "scores": scores}

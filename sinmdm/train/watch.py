@@ -68,12 +68,13 @@ class QualityWatch:
                            start_position=np.asarray(self.start, dtype=np.float64))
 
     def check(self, module: torch.nn.Module, device: torch.device, steps: int | None = None,
-              hop: int | None = None) -> dict:
-        """Scores of samples from `module` (eval mode is restored to what it was)."""
+              hop: int | None = None, to_beat: float | None = None) -> dict:
+        """Scores of samples from `module` (eval mode is restored to what it was); `to_beat`: the
+        best balance so far (`ClipScorer.check_as_sampled`)."""
         with _evaluating(module):
             model = self.model(module, device)
             if self.scorer.settings.cleanup:
-                return self.scorer.check_as_sampled(model, steps, hop)
+                return self.scorer.check_as_sampled(model, steps, hop, to_beat)
             return self.scorer.check(model, steps, hop)
 
 
