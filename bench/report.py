@@ -250,38 +250,41 @@ WITHOUT_CLEANUP_RUNS = {"Joe_Walk-In-Circle": "watched_heading_2026-12-06",
                         "Crabnew_Crab-dance-long": "watched_world_2026-12-06"}
 
 
-def as_sampled_table(name: str = "watched_as_sampled_2026-12-07") -> str:
-    """The `cpu` recipe with checks that sample as `sample` does (cleanup, and the calibrated
-    smoothing of shaking samples) beside its latest run with checks without the cleanup and
-    the 2026-12-06 checks with the cleanup alone: kept step, wall, default sampler scores."""
-    entries = results(name)
-    if entries is None:
+def as_sampled_table(name: str = "watched_as_sampled_2026-12-07", default: str = "watched_default_2026-12-07") -> str:
+    """Per clip, default sampler: the `cpu` recipe's latest run with checks on raw samples, the run with
+    checks that sample as `sample` does (cleanup, calibrated smoothing of shaking samples), and the
+    default of 2026-12-07 (those checks and the pace term in the balance)."""
+    as_sampled, shipped = results(name) or [], results(default) or []
+    if not as_sampled and not shipped:
         return "(no as-sampled results yet)\n"
     lines = header("clip", "checks", "kept step (of)", "train wall", "checks' share of it", "coverage %", "global div",
-                   "local div", "turning distance deg/s (allowed)", "jitter (x clip)", "smoothing", "plausible")
-    for entry in entries:
-        arms = [("without cleanup", next((e for e in results(WITHOUT_CLEANUP_RUNS.get(entry["tag"], "watched_compiled_2026-12-06"))
-                                          or [] if e["tag"] == entry["tag"]), None)),
-                ("cleanup (2026-12-06)", next((e for e in results("watched_check_cleanup_2026-12-06") or []
-                                               if e["tag"] == entry["tag"]), None)),
-                ("**as sampled**", entry)]
+                   "local div", "pace m/s (clip)", "turning distance deg/s (allowed)", "jitter (x clip)", "smoothing",
+                   "plausible", "verdicts")
+    for tag in dict.fromkeys(e["tag"] for e in [*as_sampled, *shipped]):
+        baseline = results(WITHOUT_CLEANUP_RUNS.get(tag, "watched_compiled_2026-12-06")) or []
+        arms = [("raw samples", next((e for e in baseline if e["tag"] == tag), None)),
+                ("as sampled", next((e for e in as_sampled if e["tag"] == tag), None)),
+                ("**as sampled + pace (default)**", next((e for e in shipped if e["tag"] == tag), None))]
         for label, arm in arms:
             row = arm and next((r for r in arm["rows"] if r["variant"] == "default"), None)
             if not row:
                 continue
             a = row.get("plausibility") or {}
             allowed = max(10.0, 2 * a["clip_turning_halves_deg_s"]) if "clip_turning_halves_deg_s" in a else None
+            verdicts = Counter(v.split(":")[0].split(" ")[0] for v in row.get("verdicts") or [])
             lines.append(
-                f"| {entry['tag']} | {label} | {arm['kept_step']} ({arm['train_steps']}) | {_duration(arm['train_wall_seconds'])} "
+                f"| {tag} | {label} | {arm['kept_step']} ({arm['train_steps']}) | {_duration(arm['train_wall_seconds'])} "
                 f"| {100 * arm['check_seconds'] / arm['train_seconds']:.0f} % | {fmt(row['coverage'], 1)} "
                 f"| {fmt(row['global_diversity'])} | {fmt(row['local_diversity'])} "
+                f"| {fmt(a.get('pace_m_s'))} ({fmt(a.get('clip_pace_m_s'))}) "
                 f"| {fmt(a.get('turning_distance_deg_s'), 1)} ({fmt(allowed, 1)}) | {fmt(a.get('jitter_ratio'), 1)} "
                 f"| {fmt((arm.get('sampling_chosen') or {}).get('smooth'), 0)} "
-                f"| {row['samples'] - a.get('implausible', 0)}/{row['samples']} |")
+                f"| {row['samples'] - a.get('implausible', 0)}/{row['samples']} "
+                f"| {', '.join(f'{k} {v}' for k, v in sorted(verdicts.items()))} |")
     return "\n".join(lines) + "\n"
 
 
-def as_sampled_curve_table(name: str = "watched_as_sampled_2026-12-07") -> str:
+def as_sampled_curve_table(name: str = "watched_default_2026-12-07") -> str:
     """The quality curve of the as-sampled runs; `s` marks a check scored with 1 frame of smoothing."""
     entries = results(name)
     if entries is None:
@@ -296,6 +299,25 @@ def as_sampled_curve_table(name: str = "watched_as_sampled_2026-12-07") -> str:
             cells.append(f"{c['step']}: {fmt(c['coverage'], 0)} / {fmt(c['global_diversity'])} / {fmt(c['jitter_ratio'], 1)}x"
                          f"{' s' if c.get('smooth') else ''} ({fmt(c['balance'])})" + ("*" if c["step"] == entry["kept_step"] else ""))
         lines.append(f"| {entry['tag']} | {'; '.join(cells).replace(':**;', ':**')} |")
+    return "\n".join(lines) + "\n"
+
+
+def in_order_table(name: str = "in_order_2026-12-07") -> str:
+    """bench/in_order.py: coverage of samples made of exact copies of the clip in stretches of L
+    frames, per clip, and the in-order run length of real samples."""
+    entries = results(name)
+    if entries is None:
+        return "(no in-order results yet)\n"
+    lengths = (32, 64, 96, 128, 192, 256)  # bench/in_order.py STRETCHES; a clip shorter than one shows the whole clip
+    lines = header("clip (frames at 30 fps)", *[f"stretches of {n}" for n in lengths], "the whole clip in order",
+                   "samples' in-order runs, frames")
+    for e in entries:
+        by_length = {c["stretch"]: c for c in e["copied"]}
+        cells = [(f"{fmt(by_length[n]['coverage'], 1)} ({' / '.join(fmt(v, 1) for v in by_length[n]['coverage_per_seed'])})"
+                  if n in by_length and n < e["frames"] else "") for n in lengths]
+        whole = next(c for c in e["copied"] if c["stretch"] == e["frames"])
+        runs = "; ".join(f"{fmt(r['in_order_run_frames'], 1)} ({Path(r['samples']).name})" for r in e["samples"])
+        lines.append(f"| {e['clip']} ({e['frames']}) | {' | '.join(cells)} | {fmt(whole['coverage'], 1)} | {runs} |")
     return "\n".join(lines) + "\n"
 
 
@@ -401,6 +423,7 @@ TABLES = {"WATCHED_TABLE": watched_table, "WATCHED_1206_TABLE": lambda: watched_
           "WATCHED_COMPILED_TABLE": lambda: watched_table("watched_compiled_2026-12-06", jitter=True),
           "ROOT_FRAME_TABLE": root_frame_table, "TURNING_TABLE": turning_table,
           "AS_SAMPLED_TABLE": as_sampled_table, "AS_SAMPLED_CURVE_TABLE": as_sampled_curve_table,
+          "IN_ORDER_TABLE": in_order_table,
           "WATCHED_COMPILED_4000_TABLE": lambda: watched_table("watched_compiled_4000_2026-12-06", jitter=True), "WATCHED_CURVE_TABLE": watched_curve_table, "LAYOUTS_TABLE": layouts_table,
           "LAYOUTS_1205_TABLE": lambda: layouts_table("layouts_2026-12-05"),
           "LAYOUTS_1206_TABLE": lambda: layouts_table("layouts_2026-12-06"), "SMOOTHING_TABLE": smoothing_table, "CONTACT_FLOORS_TABLE": contact_floors_table,
