@@ -250,6 +250,14 @@ WITHOUT_CLEANUP_RUNS = {"Joe_Walk-In-Circle": "watched_heading_2026-12-06",
                         "Crabnew_Crab-dance-long": "watched_world_2026-12-06"}
 
 
+def _watch_share(entry: dict) -> str:
+    """Seconds the watch took (its checks, then the sampling calibration's trials) and their share
+    of the whole `sinmdm train` wall (compilation, both stages, export of the checkpoint included)."""
+    calibration = sum(t.get("check_seconds", 0.0) for t in (entry.get("sampling") or {}).get("trials", []))
+    seconds = entry["check_seconds"] + calibration
+    return f"{seconds:.0f} s: {100 * seconds / entry['train_wall_seconds']:.0f} %"
+
+
 def as_sampled_table(name: str = "watched_as_sampled_2026-12-07", default: str = "watched_default_2026-12-07") -> str:
     """Per clip, default sampler: the `cpu` recipe's latest run with checks on raw samples, the run with
     checks that sample as `sample` does (cleanup, calibrated smoothing of shaking samples), and the
@@ -257,7 +265,7 @@ def as_sampled_table(name: str = "watched_as_sampled_2026-12-07", default: str =
     as_sampled, shipped = results(name) or [], results(default) or []
     if not as_sampled and not shipped:
         return "(no as-sampled results yet)\n"
-    lines = header("clip", "checks", "kept step (of)", "train wall", "checks' share of it", "coverage %", "global div",
+    lines = header("clip", "checks", "kept step (of)", "train wall", "checks + calibration, share of the wall", "coverage %", "global div",
                    "local div", "pace m/s (clip)", "turning distance deg/s (allowed)", "jitter (x clip)", "smoothing",
                    "plausible", "verdicts")
     for tag in dict.fromkeys(e["tag"] for e in [*as_sampled, *shipped]):
@@ -274,7 +282,7 @@ def as_sampled_table(name: str = "watched_as_sampled_2026-12-07", default: str =
             verdicts = Counter(v.split(":")[0].split(" ")[0] for v in row.get("verdicts") or [])
             lines.append(
                 f"| {tag} | {label} | {arm['kept_step']} ({arm['train_steps']}) | {_duration(arm['train_wall_seconds'])} "
-                f"| {100 * arm['check_seconds'] / arm['train_seconds']:.0f} % | {fmt(row['coverage'], 1)} "
+                f"| {_watch_share(arm)} | {fmt(row['coverage'], 1)} "
                 f"| {fmt(row['global_diversity'])} | {fmt(row['local_diversity'])} "
                 f"| {fmt(a.get('pace_m_s'))} ({fmt(a.get('clip_pace_m_s'))}) "
                 f"| {fmt(a.get('turning_distance_deg_s'), 1)} ({fmt(allowed, 1)}) | {fmt(a.get('jitter_ratio'), 1)} "

@@ -232,13 +232,18 @@ def _print_checks(run_dir: Path) -> None:
 
     checks = check_records(run_dir)
     table = Table(title="quality checks (EMA weights)")
-    for column in ("step", "coverage %", "global", "local", "balance", "jitter", "s"):
+    for column in ("step", "coverage %", "global", "local", "balance", "jitter", "turning off", "pace off", "s"):
         table.add_column(column, justify="right")
     for record in checks:
         c = record["check"]
+        # turning and pace: the distance from the clip's over what the balance allows (the term is allowed / off)
+        off = {key: (f"{c[key]:.1f} / {c[allowed]:.1f}" if key == "turning_distance_deg_s" else f"{c[key]:.2f} / {c[allowed]:.2f}")
+               if key in c and allowed in c else "-"
+               for key, allowed in (("turning_distance_deg_s", "turning_allowed_deg_s"), ("pace_distance_m_s", "pace_allowed_m_s"))}
         table.add_row(str(record["step"]), f"{c['coverage']:.1f}", f"{c['global_diversity']:.2f}",
-                      f"{c['local_diversity']:.2f}", f"{c['balance']:.3f}", f"{c['jitter_ratio']:.1f}",
-                      f"{c['check_seconds']:.1f}")
+                      f"{c['local_diversity']:.2f}", f"{c['balance']:.3f}",
+                      f"{c['jitter_ratio']:.1f}" + (" s" if c.get("smooth") else ""), off["turning_distance_deg_s"],
+                      off["pace_distance_m_s"], f"{c['check_seconds']:.1f}")
     console.print(table)
 
 
