@@ -36,24 +36,17 @@ MATCH_WINDOW = 15
 SEEDS = (0, 1)
 
 
-def clip_features(name: str) -> np.ndarray:
-    from sinmdm.eval.motion_features import eval_features, protocol_for
-    from sinmdm.runtime import read_bvh
-
-    clip = read_bvh(MOTIONS / name)
-    return eval_features(clip, protocol_for(clip, eval_protocol(name)))
-
-
-def copied_stretches(reference: np.ndarray, length: int, samples: int = 20, seed: int = 0) -> dict:
+def copied_stretches(reference: np.ndarray, length: int, samples: int = 20, seed: int = 0) -> float:
+    """Coverage (%) of `samples` motions of twice the clip made of its frames in stretches of `length`."""
     from sinmdm.eval import metrics
 
     rng = np.random.default_rng(seed)
-    frames, length = 2 * len(reference), min(length, len(reference))
+    frames = 2 * len(reference)
     motions = []
     for _ in range(samples):
         starts = rng.integers(0, len(reference) - length + 1, size=-(-frames // length))
         motions.append(np.concatenate([reference[s:s + length] for s in starts])[:frames])
-    return {"stretch": length, "coverage": round(metrics.coverage_many(reference, motions), 1)}
+    return round(metrics.coverage_many(reference, motions), 1)
 
 
 def in_order_runs(reference: np.ndarray, sample: np.ndarray) -> np.ndarray:
@@ -77,16 +70,16 @@ def main() -> None:
     from sinmdm.eval.motion_features import eval_features, protocol_for
     from sinmdm.runtime import read_bvh
 
-    reference = clip_features(args.clip)
+    clip = read_bvh(MOTIONS / args.clip)
+    protocol = protocol_for(clip, eval_protocol(args.clip))
+    reference = eval_features(clip, protocol)
     result = {"clip": args.clip, "frames": len(reference), "copied": [], "samples": []}
     for length in (*STRETCHES, len(reference)):
         if length > len(reference):
             continue
-        seeds = [copied_stretches(reference, length, seed=seed)["coverage"] for seed in SEEDS]
+        seeds = [copied_stretches(reference, length, seed=seed) for seed in SEEDS]
         result["copied"].append({"stretch": length, "coverage_per_seed": seeds, "coverage": round(float(np.mean(seeds)), 1)})
         print(json.dumps(result["copied"][-1]), flush=True)
-    clip = read_bvh(MOTIONS / args.clip)
-    protocol = protocol_for(clip, eval_protocol(args.clip))
     for folder in args.samples_dir:
         runs = [in_order_runs(reference, eval_features(read_bvh(f), protocol)) for f in sorted(folder.glob("*.bvh"))]
         lengths = np.concatenate(runs)

@@ -292,24 +292,6 @@ def as_sampled_table(name: str = "watched_as_sampled_2026-12-07", default: str =
     return "\n".join(lines) + "\n"
 
 
-def as_sampled_curve_table(name: str = "watched_default_2026-12-07") -> str:
-    """The quality curve of the as-sampled runs; `s` marks a check scored with 1 frame of smoothing."""
-    entries = results(name)
-    if entries is None:
-        return "(no as-sampled results yet)\n"
-    lines = header("clip", "step: coverage % / global div / jitter (balance); s = smoothed, * = kept")
-    for entry in entries:
-        cells, stage = [], None
-        for c in entry["checks"]:
-            if c.get("stage") != stage:
-                stage = c.get("stage")
-                cells.append(f"**then {stage}:**")
-            cells.append(f"{c['step']}: {fmt(c['coverage'], 0)} / {fmt(c['global_diversity'])} / {fmt(c['jitter_ratio'], 1)}x"
-                         f"{' s' if c.get('smooth') else ''} ({fmt(c['balance'])})" + ("*" if c["step"] == entry["kept_step"] else ""))
-        lines.append(f"| {entry['tag']} | {'; '.join(cells).replace(':**;', ':**')} |")
-    return "\n".join(lines) + "\n"
-
-
 def in_order_table(name: str = "in_order_2026-12-07") -> str:
     """bench/in_order.py: coverage of samples made of exact copies of the clip in stretches of L
     frames, per clip, and the in-order run length of real samples."""
@@ -346,19 +328,22 @@ def turning_table(name: str = "turning_2026-12-06") -> str:
     return "\n".join(lines) + "\n"
 
 
-def watched_curve_table() -> str:
-    """The quality curve of every watched run: the scores at each check."""
-    entries = results("watched")
+def watched_curve_table(name: str = "watched", jitter: bool = False) -> str:
+    """The quality curve of every watched run: the scores at each check; `jitter`: also each
+    check's jitter, and `s` where the check was scored smoothed (checks as sampled)."""
+    entries = results(name)
     if entries is None:
         return "(no watched results yet)\n"
-    lines = header("clip", "step: coverage % / global div (balance); * = kept")
+    lines = header("clip", "step: coverage % / global div / jitter (balance); s = smoothed, * = kept" if jitter
+                   else "step: coverage % / global div (balance); * = kept")
     for entry in entries:
         cells, stage = [], None
         for c in entry["checks"]:
             if c.get("stage") != stage:  # the second stage starts: mark it
                 stage = c.get("stage")
                 cells.append(f"**then {stage}:**")
-            cells.append(f"{c['step']}: {fmt(c['coverage'], 0)} / {fmt(c['global_diversity'])} ({fmt(c['balance'])})"
+            shake = f" / {fmt(c['jitter_ratio'], 1)}x{' s' if c.get('smooth') else ''}" if jitter else ""
+            cells.append(f"{c['step']}: {fmt(c['coverage'], 0)} / {fmt(c['global_diversity'])}{shake} ({fmt(c['balance'])})"
                          + ("*" if c["step"] == entry["kept_step"] else ""))
         lines.append(f"| {entry['tag']} | {'; '.join(cells).replace(':**;', ':**')} |")
     return "\n".join(lines) + "\n"
@@ -430,7 +415,7 @@ def contact_floors_table(date: str = "2026-12-06") -> str:
 TABLES = {"WATCHED_TABLE": watched_table, "WATCHED_1206_TABLE": lambda: watched_table("watched_2026-12-06", jitter=True),
           "WATCHED_COMPILED_TABLE": lambda: watched_table("watched_compiled_2026-12-06", jitter=True),
           "ROOT_FRAME_TABLE": root_frame_table, "TURNING_TABLE": turning_table,
-          "AS_SAMPLED_TABLE": as_sampled_table, "AS_SAMPLED_CURVE_TABLE": as_sampled_curve_table,
+          "AS_SAMPLED_TABLE": as_sampled_table, "AS_SAMPLED_CURVE_TABLE": lambda: watched_curve_table("watched_default_2026-12-07", jitter=True),
           "IN_ORDER_TABLE": in_order_table,
           "WATCHED_COMPILED_4000_TABLE": lambda: watched_table("watched_compiled_4000_2026-12-06", jitter=True), "WATCHED_CURVE_TABLE": watched_curve_table, "LAYOUTS_TABLE": layouts_table,
           "LAYOUTS_1205_TABLE": lambda: layouts_table("layouts_2026-12-05"),

@@ -7,8 +7,8 @@ best *balance* is kept as `best.pt`; once the balance has not improved for `pati
 checks after reaching the band, training stops.
 
 Balance (`sinmdm.eval.balance`) = min(coverage / 95, global diversity / 1.3, 3 / jitter
-ratio): a copying model and a drifting one both lose to the paper's own row. A check whose
-samples teleport is never kept.
+ratio, and the turning and pace terms): a copying model and a drifting one both lose to the
+paper's own row. A check whose samples teleport is never kept.
 
 The checks always use the same seeds, so two checks differ by the weights only. By default
 they sample without the foot cleanup: they judge the weights, not the post-process. With
