@@ -72,6 +72,28 @@ def test_frame_norm_option(tmp_path):
     assert not (tmp_path / "bad").exists()
 
 
+def test_ema_and_loss_weighting_options(tmp_path):
+    run_dir = tmp_path / "raw"
+    train(str(DEMO_CLIP), "--out", str(run_dir), "--steps", "2", "--ema", "0", "--loss-weighting", "min-snr")
+    config = load_config(run_dir)["train"]
+    assert config["ema"] is None and config["loss_weighting"] == "min-snr"
+    assert load_state(run_dir).get("ema") is None
+    for flag, value, words in [("--ema", "1", "--ema must be"), ("--loss-weighting", "snr", "--loss-weighting must be")]:
+        bad = train(str(DEMO_CLIP), "--out", str(tmp_path / "bad"), "--steps", "2", flag, value, check=False)
+        assert bad.returncode == 2 and words in bad.stderr
+        assert not (tmp_path / "bad").exists()
+
+
+def test_min_snr_weighting_keeps_the_mean():
+    from sinmdm.runtime.schedule import cosine_alphas_cumprod
+    from sinmdm.train.diffusion import min_snr_weighting
+
+    abar = cosine_alphas_cumprod()
+    weights = min_snr_weighting(abar)(torch.arange(len(abar)))
+    assert abs(float(weights.mean()) - 1.0) < 1e-5
+    assert float(weights[0]) == float(weights.max()) and float(weights[-1]) < 1e-3  # capped when clean, ~0 at pure noise
+
+
 @pytest.mark.parametrize("mode", [[], pytest.param(["--compile"], marks=needs_compiler)], ids=["eager", "compiled"])
 def test_kill_and_resume(tmp_path, mode):
     run_dir = tmp_path / "killed"

@@ -58,6 +58,8 @@ def train(
     root_frame: Optional[str] = typer.Option(None, "--root-frame", help="world (the paper: the trajectory joint's rotation and velocity in the world), heading (seen from the character's heading, plus its rate of turn: a clip that turns keeps turning; a trajectory from another skeleton cannot guide it) or auto (the cpu preset: heading for a clip that turns more than 10 deg/s on average; see BENCHMARKS.md)."),
     check_cleanup: Optional[bool] = typer.Option(None, "--check-cleanup/--no-check-cleanup", help="Quality checks sample as `sample` does: the foot cleanup on, shaking samples smoothed as calibration would (the `cpu` preset's default; see BENCHMARKS.md)."),
     compile: Optional[bool] = typer.Option(None, "--compile/--no-compile", help="Train through torch.compile (default: when the run has 600 steps or more on a CPU or CUDA device; about 1.4x faster after some 45 s of compiling; falls back to eager if compiling fails)."),
+    ema: Optional[float] = typer.Option(None, "--ema", help="Decay of the weights' moving average that is checked and exported (cpu preset: 0.999, reached after some 9,000 steps of warm-up; 0 = no average, the raw weights).", show_default=False),
+    loss_weighting: Optional[str] = typer.Option(None, "--loss-weighting", help="Loss weight over the noise level: uniform (the paper) or min-snr (min(SNR, 5), mean 1; see BENCHMARKS.md)."),
     foot_loss: Optional[float] = typer.Option(None, "--foot-loss", help="Weight of a foot-contact loss (the clip's planted joints kept still in the prediction, by forward kinematics; 0 = the paper's loss alone; see BENCHMARKS.md)."),
 ) -> None:
     """Train a denoiser on one clip."""
@@ -68,6 +70,7 @@ def train(
 
     from ..train.checkpoint import CONFIG
     from ..runtime.features import VELOCITY_UNITS
+    from ..train.diffusion import LOSS_WEIGHTINGS
     from ..train.model import NORM_KINDS
     from ..train.presets import preset as get_preset
     from ..train.trainer import ROOT_FRAME_CHOICES, kept_sampling, resumed_budget, train as run_training
@@ -80,13 +83,20 @@ def train(
         raise SinMDMError(f"--root-frame must be {', '.join(ROOT_FRAME_CHOICES)}, got '{root_frame}'")
     if foot_loss is not None and not (foot_loss >= 0 and math.isfinite(foot_loss)):
         raise SinMDMError(f"--foot-loss must be 0 or a positive number, got {foot_loss}")
+    if ema is not None and not 0 <= ema < 1:
+        raise SinMDMError(f"--ema must be 0 (no average) or a decay below 1, got {ema}")
+    if loss_weighting is not None and loss_weighting not in LOSS_WEIGHTINGS:
+        raise SinMDMError(f"--loss-weighting must be {' or '.join(LOSS_WEIGHTINGS)}, got '{loss_weighting}'")
     if check_every is not None and check_every < 0:
         raise SinMDMError(f"--check-every must be 0 (never) or more, got {check_every}")
     config = get_preset(preset).with_overrides(
         steps=steps, width=width, crop=crop, batch=batch, checkpoint_every=checkpoint_every, fps=fps, norm=norm,
         velocity_unit=velocity_unit, root_frame=root_frame, foot_loss=foot_loss, check_cleanup=check_cleanup,
         early_stop=False if steps else None, patience=patience,  # --steps forces a fixed budget: the watch still keeps the best
+        loss_weighting=loss_weighting,
     )
+    if ema is not None:
+        config = replace(config, ema=ema or None)
     if check_every is not None:
         config = config.with_overrides(check_every=check_every or None) if check_every else replace(config, check_every=None)
     if resume and steps is None and (out / CONFIG).is_file():

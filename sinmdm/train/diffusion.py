@@ -18,6 +18,23 @@ from sinmdm.runtime.schedule import cosine_alphas_cumprod
 # Maps timesteps (B,) to per-example loss weights (B,).
 LossWeighting = Callable[[Tensor], Tensor]
 
+LOSS_WEIGHTINGS = ("uniform", "min-snr")
+
+
+def min_snr_weighting(alphas_cumprod: np.ndarray, gamma: float = 5.0) -> LossWeighting:
+    """Min-SNR-gamma (Hang et al. 2023) for an x0 target: weight min(SNR_t, gamma), scaled to a mean
+    of 1 over t so that the learning rate means what it meant under the paper's uniform loss. Against
+    the uniform loss it trains the cleaner half (detail) more and the noisiest steps (layout) less."""
+    abar = np.asarray(alphas_cumprod, dtype=np.float64)
+    weights = np.minimum(abar / np.maximum(1.0 - abar, 1e-12), gamma)
+    table = torch.as_tensor(weights / weights.mean(), dtype=torch.float32)
+    return lambda t: table.to(t.device)[t.long()]
+
+
+def loss_weighting(name: str, alphas_cumprod: np.ndarray) -> LossWeighting | None:
+    """The weighting over t a recipe names: None for the paper's uniform loss."""
+    return min_snr_weighting(alphas_cumprod) if name == "min-snr" else None
+
 
 def _per_example(values: Tensor, t: Tensor, like: Tensor) -> Tensor:
     """values[t] cast to like's dtype/device and shaped (B, 1, ..., 1) to broadcast against it."""

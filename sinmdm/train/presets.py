@@ -35,6 +35,7 @@ class TrainConfig:
     # checks sample as `sample` will: the foot cleanup on, shaking samples smoothed where calibration would
     # smooth them (eval.balance.ClipScorer.check_as_sampled); False: raw samples, no cleanup
     check_cleanup: bool = False
+    loss_weighting: str = "uniform"  # over t: "uniform" (the paper) | "min-snr" (train.diffusion.min_snr_weighting)
     foot_loss: float = 0.0  # weight of the foot-contact loss (train/foot_loss.py; 0 = the paper's loss alone)
     velocity_unit: str = "frame"  # the root velocity channels in metres per "frame" (paper) or "second" (runtime.features.model_scale)
     # the trajectory joint seen in the "world" (paper) or from its "heading" (runtime.heading);

@@ -22,12 +22,12 @@ from ..runtime.errors import SinMDMError
 from ..runtime.features import MotionCodec, build_codec
 from ..runtime.graph_space import graph_space
 from ..runtime.heading import ROOT_FRAMES, HeadingFrame, clip_heading_frame, trajectory_rotation
-from ..runtime.schedule import NUM_TIMESTEPS
+from ..runtime.schedule import NUM_TIMESTEPS, cosine_alphas_cumprod
 from .checkpoint import (BEST, CHECKSUMS, CONFIG, LOG, RUN_FORMAT, STAGE_PREFIX, load_best, load_config,
                          load_state, log_records, nonfinite_tensor, save_run)
 from .compiled import COMPILE_CHOICES, Forward, training_forward
 from .data import BatchSampler
-from .diffusion import GaussianDiffusion
+from .diffusion import GaussianDiffusion, loss_weighting
 from .foot_loss import FootContactLoss
 from .model import Denoiser, ModelConfig, count_parameters, receptive_field
 from .presets import TrainConfig
@@ -162,7 +162,8 @@ class Run:
         self.ema = copy.deepcopy(self.model).requires_grad_(False) if config.ema else None
         self.optimizer = torch.optim.AdamW(self.model.parameters(), lr=config.lr, weight_decay=config.weight_decay)
         self.scheduler = torch.optim.lr_scheduler.LambdaLR(self.optimizer, learning_rate_factor(config))
-        self.diffusion = GaussianDiffusion()
+        abar = cosine_alphas_cumprod()
+        self.diffusion = GaussianDiffusion(abar, loss_weighting(config.loss_weighting, abar))
         self.generator = torch.Generator().manual_seed(seed)
         clip_tensor = torch.from_numpy(np.ascontiguousarray(space.to_graph(clip.features).T, dtype=np.float32))
         self.sampler = BatchSampler(clip_tensor, config, self.generator)
