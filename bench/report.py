@@ -292,6 +292,48 @@ def as_sampled_table(name: str = "watched_as_sampled_2026-12-07", default: str =
     return "\n".join(lines) + "\n"
 
 
+# The recipe arms of 2026-12-07: the default run of that day, then each arm (`--train-args` of bench/watched.py).
+RECIPE_ARMS = (("default (crop 64, EMA with warm-up, uniform loss)", ["watched_default_2026-12-07"]),
+               ("`--crop 96`", ["recipe_crop96_2026-12-07", "recipe_crop96_idle_2026-12-07"]), ("`--ema 0` (raw weights)", ["recipe_noema_2026-12-07"]),
+               ("`--loss-weighting min-snr`", ["recipe_minsnr_2026-12-07"]),
+               ("`--steps 4800` (tail from 3,360)", ["recipe_crab_long_2026-12-07"]))
+
+
+def recipe_arms_table() -> str:
+    """Per clip, default sampler, 20 samples of twice the clip: the default recipe beside one-override arms."""
+    arms = [(label, [e for name in names for e in results(name) or []]) for label, names in RECIPE_ARMS]
+    tags = list(dict.fromkeys(e["tag"] for _, entries in arms[1:] for e in entries))
+    if not tags:
+        return "(no recipe arms yet)\n"
+    lines = header("clip", "recipe", "kept step (of)", "train wall", "steps / hop / smoothing", "coverage %", "global div",
+                   "local div", "jitter (x clip)", "pace m/s (clip)", "plausible")
+    for tag in tags:
+        for label, entries in arms:
+            entry = next((e for e in entries if e["tag"] == tag), None)
+            row = entry and next((r for r in entry["rows"] if r["variant"] == "default"), None)
+            if not row:
+                continue
+            a, chosen = row.get("plausibility") or {}, entry.get("sampling_chosen") or {}
+            lines.append(
+                f"| {tag} | {label} | {entry['kept_step']} ({entry['train_steps']}) | {_duration(entry['train_wall_seconds'])} "
+                f"| {row['steps']} / {row['hop']} / {fmt(chosen.get('smooth'), 0)} | {fmt(row['coverage'], 1)} "
+                f"| {fmt(row['global_diversity'])} | {fmt(row['local_diversity'])} | {fmt(a.get('jitter_ratio'), 1)} "
+                f"| {fmt(a.get('pace_m_s'))} ({fmt(a.get('clip_pace_m_s'))}) | {row['samples'] - a.get('implausible', 0)}/{row['samples']} |")
+    return "\n".join(lines) + "\n"
+
+
+def crab_sampling_table(name: str = "crab_sampling_grid_2026-12-07") -> str:
+    """bench/steps_compare.py on the default crab model: 20 samples per sampling setting."""
+    entries = results(name)
+    if not entries:
+        return "(no sampling grid yet)\n"
+    lines = header("steps / hop", "coverage %", "global div", "local div", "sampling s (20 samples)")
+    for row in sorted((r for e in entries for r in e["rows"]), key=lambda r: (r["hop"], -r["steps"])):
+        lines.append(f"| {row['steps']} / {row['hop']} | {fmt(row['coverage'], 1)} | {fmt(row['global_diversity'])} "
+                     f"| {fmt(row['local_diversity'])} | {fmt(row['sampling_seconds'], 0)} |")
+    return "\n".join(lines) + "\n"
+
+
 def in_order_table(name: str = "in_order_2026-12-07") -> str:
     """bench/in_order.py: coverage of samples made of exact copies of the clip in stretches of L
     frames, per clip, and the in-order run length of real samples."""
@@ -416,7 +458,8 @@ TABLES = {"WATCHED_TABLE": watched_table, "WATCHED_1206_TABLE": lambda: watched_
           "WATCHED_COMPILED_TABLE": lambda: watched_table("watched_compiled_2026-12-06", jitter=True),
           "ROOT_FRAME_TABLE": root_frame_table, "TURNING_TABLE": turning_table,
           "AS_SAMPLED_TABLE": as_sampled_table, "AS_SAMPLED_CURVE_TABLE": lambda: watched_curve_table("watched_default_2026-12-07", jitter=True),
-          "IN_ORDER_TABLE": in_order_table,
+          "IN_ORDER_TABLE": in_order_table, "RECIPE_ARMS_TABLE": recipe_arms_table,
+          "CRAB_LONG_CURVE_TABLE": lambda: watched_curve_table("recipe_crab_long_2026-12-07", jitter=True), "CRAB_SAMPLING_TABLE": crab_sampling_table,
           "WATCHED_COMPILED_4000_TABLE": lambda: watched_table("watched_compiled_4000_2026-12-06", jitter=True), "WATCHED_CURVE_TABLE": watched_curve_table, "LAYOUTS_TABLE": layouts_table,
           "LAYOUTS_1205_TABLE": lambda: layouts_table("layouts_2026-12-05"),
           "LAYOUTS_1206_TABLE": lambda: layouts_table("layouts_2026-12-06"), "SMOOTHING_TABLE": smoothing_table, "CONTACT_FLOORS_TABLE": contact_floors_table,
