@@ -18,11 +18,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from bench.layouts import derived_clip  # noqa: E402
-
-
-def samples_dir(run_dir: Path, variant: str) -> Path:
-    """The folder bench/watched.py wrote a row's samples to ("default hop 32" -> samples_default_hop)."""
-    return run_dir / ("samples_" + variant.split(" ")[0] + ("_hop" if " hop " in variant else ""))
+from bench.watched import samples_dir  # noqa: E402
 
 
 def main() -> None:

@@ -40,6 +40,11 @@ CASES = [
 ]
 
 
+def samples_dir(run_dir: Path, variant: str) -> Path:
+    """Where a row's samples are written: "default" -> samples_default, "default hop 32" -> samples_default_hop."""
+    return run_dir / ("samples_" + variant.split(" ")[0] + ("_hop" if " hop " in variant else ""))
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--work", type=Path, default=ROOT / "runs" / "watched")
@@ -80,7 +85,7 @@ def main() -> None:
             frames = None
             rows = []
             for variant, options in SAMPLER_VARIANTS.items():
-                row = sample_and_score(path, clip, run_dir / f"samples_{variant}", steps, args.samples, protocol,
+                row = sample_and_score(path, clip, samples_dir(run_dir, variant), steps, args.samples, protocol,
                                        hop=None, **options)
                 frames = row["frames"]
                 rows.append({"variant": variant, **row})
@@ -89,9 +94,10 @@ def main() -> None:
             half = model.denoiser_for(frames).window // 2
             if model.default_hop(frames) not in (None, half):
                 for variant, options in SAMPLER_VARIANTS.items():
-                    row = sample_and_score(path, clip, run_dir / f"samples_{variant}_hop", steps, args.samples,
+                    variant = f"{variant} hop {half}"
+                    row = sample_and_score(path, clip, samples_dir(run_dir, variant), steps, args.samples,
                                            protocol, hop=half, **options)
-                    rows.append({"variant": f"{variant} hop {half}", **row})
+                    rows.append({"variant": variant, **row})
             checks = [{"step": r["step"], **r["check"]} for r in read_log(run_dir) if "check" in r]
             stage = config.get("stage")
             if stage:  # the second stage's checks, on the run's step axis

@@ -13,6 +13,7 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
 
+from sinmdm.runtime.errors import SinMDMError
 from sinmdm.runtime.schedule import cosine_alphas_cumprod
 
 # Maps timesteps (B,) to per-example loss weights (B,).
@@ -33,6 +34,8 @@ def min_snr_weighting(alphas_cumprod: np.ndarray, gamma: float = 5.0) -> LossWei
 
 def loss_weighting(name: str, alphas_cumprod: np.ndarray) -> LossWeighting | None:
     """The weighting over t a recipe names: None for the paper's uniform loss."""
+    if name not in LOSS_WEIGHTINGS:
+        raise SinMDMError(f"unknown loss weighting {name!r}: use {' or '.join(LOSS_WEIGHTINGS)}")
     return min_snr_weighting(alphas_cumprod) if name == "min-snr" else None
 
 
