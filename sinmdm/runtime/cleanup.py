@@ -6,15 +6,18 @@ with numpy IK so that planted joints stop sliding:
 
 1. Intervals: runs of frames with label > 0.5 (unless the joint travels further than
    `MAX_SLIDE` over the run: a label on a swinging limb) or where the joint moves
-   slower than the codec's contact speed, at least `MIN_CONTACT_FRAMES` long.
+   slower than the codec's contact speed, at least `MIN_CONTACT_FRAMES` long, and
+   never higher than `CONTACT_HEIGHT` above the joint's resting height.
    Inside a run the joint's target is its position averaged over the run, height
    included: a planted foot neither slides nor bobs (sampled feet rise and fall by
    about 10 cm/s while planted, 15x the crab clip's own: BENCHMARKS.md). A joint planted
    while the joint above it on the foot is (the ball under a planted ankle) is pinned where
    the ankle's pin carries it over the frames they share, so the pins stay a foot apart.
-   The IK offset (target - position) fades out over `BLEND_FRAMES` after a run and in
-   over `BLEND_FRAMES` before the next one (cosine ramps, normalised where two ramps
-   overlap), so nothing pops.
+   The IK offset (target - position) eases out after a run and in before the next one
+   over about `EASE_FRAMES`, the smoothest curve that meets the pins (banded.fit_smooth),
+   so a foot lands and lifts off at its sampled speed and nothing pops. Where a leg
+   cannot reach its pin with the knee no straighter than sampled, the hips are lowered
+   (hips_drop) rather than the knee locked straight.
 2. Legs: contact joints on one chain (Mixamo's Foot, ToeBase, Toe_End) form one
    leg. Its effector is the highest of them, moved up past short end bones (a toe
    whose bone is shorter than half the bone above it hands over to the ankle).
@@ -40,6 +43,7 @@ contacts comes back unchanged. Everything is vectorised over frames.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -48,16 +52,27 @@ from .animation import Animation
 from .contacts import contact_labels
 from .kinematics import chain_kinematics, forward_kinematics, positions_by_chunks
 from .rig import ancestors
+from .banded import fit_smooth
 from .smoothing import smooth_frames
 
 CONTACT_THRESHOLD = 0.5  # a label above this is "in contact"
 MIN_CONTACT_FRAMES = 2  # shorter runs are noise
-BLEND_FRAMES = 4  # frames of fade in before and out after a contact run
+# The offsets that pin a joint ease in before a contact run and out after it over about EASE_FRAMES
+# (contact_offsets). A cosine fade of the offset at the run's edge over 4 frames started and stopped
+# the feet within a frame and made their jerk 2-4x the sampled feet's (BENCHMARKS.md).
+EASE_FRAMES = 3.0
+PIN_WEIGHT, FREE_WEIGHT = 1e4, 1e-3  # how strongly the fit holds the pins inside a run, and zero outside
+FADED = 1e-3  # a weight below this is none: frames far from any contact stay untouched
 LIFT_EASE = 2.0  # frames (Gaussian sigma) over which a raise off the floor eases in and out
 SHORT_BONE = 0.5  # an end bone shorter than this share of the bone above it is a toe, not a shin
 ROOT_CORRECTION = True  # slow the root to its planted feet before the IK (plain samples only: see slow_root)
 ROOT_SMOOTHING = 9  # frames of the correction's smoothing window (0.3 s at 30 fps)
 GROW_PASSES = 2  # extra passes that pin the frames a pass slowed down (see cleanup_contacts)
+# A contact joint more than this share of the character's size above its resting height is not on
+# the floor, however slowly it moves or whatever its label says: at the top of a raised knee the
+# idle's foot was pinned 40 cm in the air and the knee jumped 13 cm in a frame when the pin moved
+# to the floor. In the clips 98-100 % of the frames their feet are slow on lie within it.
+CONTACT_HEIGHT = 0.05
 MAX_SLIDE = 0.25  # a "contact" over which the joint travels further (share of the character's size) is a label error
 # A leg with this many rotating joints above its effector (an arthropod's, not a human's hip-knee
 # or hip-joint-hip-knee) is solved as one chain by damped least squares: the smallest rotations
@@ -67,7 +82,16 @@ CHAIN_ITERATIONS = 6
 CHAIN_DAMPING = 0.02  # share of the chain's reach: keeps a straight chain's solve finite
 CHAIN_REACH = 0.98  # share of the chain's reach a target is pulled back to
 CHAIN_STEP = 0.3  # radians: the largest turn of one joint in one iteration (the linearisation's range)
+HINGE_BENT = np.radians(20.0)  # a knee bent less than this is solved about its thigh's shared hinge axis (_hinge_axes)
 PIVOT_TURN = 0.5  # radians (29 deg): the largest turn an ankle or a toe makes to aim the contact below it
+# A pin further from the hip than the sampled leg reaches locked the knee straight (180 deg, where the
+# clips never pass 175-177) on 5-12 % of frames, and it snapped back bent when the pin let go: the
+# cleanup's knees shook 7x more than the sampled ones (BENCHMARKS.md). The hips are lowered instead,
+# just enough for every pinned foot to be reached with the knee no straighter than the model sampled
+# it or than STRAIGHT_REACH of the leg's full reach (a knee of about 170 deg), whichever is straighter.
+STRAIGHT_REACH = 0.996
+DROP_EASE = 2.0  # frames (Gaussian sigma) over which the hips' drop eases in and out
+MAX_DROP = 0.15  # share of the leg's reach: the hips drop no further (a pin that far is left short)
 _EPS = 1e-9
 
 
@@ -130,6 +154,14 @@ def contact_mask(labels: np.ndarray, threshold: float = CONTACT_THRESHOLD,
     return mask
 
 
+def near_floor(positions: np.ndarray, up: int, floors: np.ndarray | None, reach: float) -> np.ndarray:
+    """(T, C) bool: contact joints (T, C, 3) no higher than `reach` above their resting heights
+    `floors` (C,) (None: each joint's lowest 5 % of frames in this motion)."""
+    heights = positions[..., up]
+    rest = np.percentile(heights, 5, axis=0) if floors is None else np.asarray(floors)
+    return heights <= rest + reach
+
+
 def drop_slides(inside: np.ndarray, positions: np.ndarray, up_axis: int, limit: float) -> np.ndarray:
     """`inside` (T,) without the runs over which the joint's horizontal positions (T, 3)
     spread further than `limit`: a label on a swinging limb, not a planted one."""
@@ -141,12 +173,6 @@ def drop_slides(inside: np.ndarray, positions: np.ndarray, up_axis: int, limit: 
     return out
 
 
-def _fade(distance: np.ndarray, blend: int) -> np.ndarray:
-    """1 at distance 0, cosine down to 0 at blend + 1 frames."""
-    x = np.clip(distance / (blend + 1.0), 0.0, 1.0)
-    return 0.5 * (1.0 + np.cos(np.pi * x))
-
-
 def _run_means(runs: np.ndarray, positions: np.ndarray, frames: np.ndarray, count: int) -> tuple[np.ndarray, np.ndarray]:
     """Per run id (0..count-1): the mean of positions (T, 3) over the run's `frames` (T,) bool, and how many."""
     ids = runs[frames]
@@ -155,11 +181,13 @@ def _run_means(runs: np.ndarray, positions: np.ndarray, frames: np.ndarray, coun
     return sums / np.maximum(counts, 1.0)[:, None], counts
 
 
-def contact_offsets(positions: np.ndarray, inside: np.ndarray, blend: int = BLEND_FRAMES,
+def contact_offsets(positions: np.ndarray, inside: np.ndarray, ease: float = EASE_FRAMES,
                     carried: np.ndarray | None = None, floor: tuple[int, float] | None = None) -> tuple[np.ndarray, np.ndarray]:
     """IK offsets of one joint: `anchor` (T, 3) and `weight` (T,) with the applied
     offset = weight * anchor. Inside an interval the anchor takes the joint to the
-    interval's mean position (weight 1); around it the boundary offsets fade out and in.
+    interval's mean position (weight 1); around it the offset eases out and in over about
+    `ease` frames, as the smoothest curve (least second differences) that meets the pins: the
+    pinned joint arrives and leaves at the speed the sample has.
     `carried` (T, 3), NaN where unset: the offset of the planted joint above this one on
     the same foot (the ankle over the ball). A run that overlaps it is pinned where that
     offset carries the joint on the shared frames: pinned on their own means over their
@@ -178,23 +206,27 @@ def contact_offsets(positions: np.ndarray, inside: np.ndarray, blend: int = BLEN
         up, height = floor
         means[:, up] = np.maximum(means[:, up], height)
     offset = np.where(inside[:, None], means[runs] - positions, 0.0)
-    previous = np.maximum.accumulate(np.where(inside, index, -1))
-    following = np.minimum.accumulate(np.where(inside, index, frames)[::-1])[::-1]
-    w_prev = np.where(previous >= 0, _fade(index - previous, blend), 0.0)
-    w_next = np.where(following < frames, _fade(following - index, blend), 0.0)
-    total = w_prev + w_next
-    mixed = w_prev[:, None] * offset[np.maximum(previous, 0)] + w_next[:, None] * offset[np.minimum(following, frames - 1)]
-    anchor = np.where(total[:, None] > 0, mixed / np.maximum(total, _EPS)[:, None], 0.0)
-    return anchor, np.minimum(total, 1.0)
+    # One fit for the offsets and their weights: exact inside the runs, eased to nothing outside.
+    trust = np.where(inside, PIN_WEIGHT, FREE_WEIGHT)
+    # FREE_WEIGHT * ease^4 sets how far the easing reaches; the first-difference term at critical
+    # damping keeps it from ringing (the second differences alone overshoot past zero and back).
+    smoothness = FREE_WEIGHT * ease**4
+    fitted = fit_smooth(np.concatenate([offset, inside[:, None].astype(np.float64)], axis=1), trust,
+                        smoothness, 2.0 * math.sqrt(FREE_WEIGHT * smoothness))
+    weight = np.where(inside, 1.0, np.clip(fitted[:, 3], 0.0, 1.0))
+    weight[weight < FADED] = 0.0
+    anchor = np.where(weight[:, None] > 0, fitted[:, :3] / np.maximum(weight, FADED)[:, None], 0.0)
+    anchor[inside] = offset[inside]  # exact pins (the fit meets them to 1e-4 of the offset)
+    return anchor, weight
 
 
-def _cyclic_offsets(positions: np.ndarray, inside: np.ndarray, shift: np.ndarray, blend: int,
+def _cyclic_offsets(positions: np.ndarray, inside: np.ndarray, shift: np.ndarray, ease: float,
                     carried: np.ndarray | None = None, floor: tuple[int, float] | None = None) -> tuple[np.ndarray, np.ndarray]:
     """contact_offsets on a loop: the cycle tiled three times (moved by `shift` per cycle)
     so that intervals and fades wrap across the seam; the middle copy is returned."""
     frames = len(positions)
     tiled = np.concatenate([positions - shift, positions, positions + shift])
-    anchor, weight = contact_offsets(tiled, np.tile(inside, 3), blend, None if carried is None else np.tile(carried, (3, 1)),
+    anchor, weight = contact_offsets(tiled, np.tile(inside, 3), ease, None if carried is None else np.tile(carried, (3, 1)),
                                      floor)
     return anchor[frames : 2 * frames], weight[frames : 2 * frames]
 
@@ -291,22 +323,20 @@ def find_legs(animation: Animation, codec, positions: np.ndarray) -> list[Leg]:
 
 # ------------------------------------------------------------------ IK
 def _hinge_axes(a: np.ndarray, b: np.ndarray, c: np.ndarray, hip_global: np.ndarray) -> np.ndarray:
-    """(T, 3) knee hinge axes (normal of the hip-knee-end plane). Frames with a straight
-    leg borrow the nearest bent frame's axis, carried in the hip's frame."""
-    axis, norm = _unit(np.cross(c - a, b - a))
-    bent = norm > 1e-6 * np.linalg.norm(c - a, axis=-1) * np.linalg.norm(b - a, axis=-1) + _EPS
-    if bent.all():
-        return axis
-    if not bent.any():
+    """(T, 3) knee hinge axes (normal of the hip-knee-end plane). A knee bends about an axis fixed
+    in its thigh: a leg bent less than HINGE_BENT takes (in part, all of it when straight) the
+    axis its bent frames share, carried in the hip's frame. The plane of a nearly straight leg
+    is noise: solved about it, the knee swung sideways for a frame (13 cm on the idle) and back."""
+    cross = np.cross(c - a, b - a)
+    axis, _ = _unit(cross)
+    bend = _angle(b - a, c - b)
+    shared, size = _unit(np.einsum("tba,tb->a", hip_global, cross))  # G^T cross, summed: weighted by how bent
+    if size < _EPS:  # never bent: any axis across the leg
         fallback = np.eye(3)[np.argmin(np.abs(_unit(c - a)[0]), axis=-1)]
         return _unit(np.cross(c - a, fallback))[0]
-    local = np.einsum("tba,tb->ta", hip_global, axis)  # G^T axis
-    index = np.arange(len(a))
-    before = np.maximum.accumulate(np.where(bent, index, -1))
-    after = np.minimum.accumulate(np.where(bent, index, len(a))[::-1])[::-1]
-    nearest = np.where(before < 0, after, np.where(after >= len(a), before,
-                                                   np.where(index - before <= after - index, before, after)))
-    return np.where(bent[:, None], axis, np.einsum("tab,tb->ta", hip_global, local[nearest]))
+    stable = np.einsum("tab,b->ta", hip_global, shared)
+    own = np.clip(bend / HINGE_BENT, 0.0, 1.0)[:, None]
+    return _unit(own * axis + (1.0 - own) * stable)[0]
 
 
 def two_bone_ik(a: np.ndarray, b: np.ndarray, c: np.ndarray, target: np.ndarray,
@@ -370,22 +400,68 @@ def _leg_joints(leg: Leg) -> list[int]:
     return list(dict.fromkeys(j for j in (*leg.chain, leg.hip, leg.knee, leg.effector, *leg.pivots) if j is not None))
 
 
-def _solve_leg(local: np.ndarray, translations: np.ndarray, parents: np.ndarray, leg: Leg, contacts: list[int],
-               targets: _Targets, free: np.ndarray | float = 1.0) -> None:
-    """Solve one leg in place on the local rotations (T, J, 3, 3); `free` (T,) scales the
-    offsets (0 where an application keeps the leg's pose). Only `_leg_joints(leg)` change,
-    and only on frames where the leg has an offset to reach."""
-    anchors, weights = targets.anchors, targets.weights * np.reshape(free, (-1, 1))
+def _effector_shift(leg: Leg, contacts: list[int], anchors: np.ndarray, weights: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(T, 3) how far the leg's effector is to move and (T,) on which frames it has to: by its
+    own offset where it is a contact, and otherwise by what its lower contacts ask."""
+    frames = len(weights)
     top = leg.contacts[0] if contacts[leg.contacts[0]] == leg.effector else None
     lower = _lower_contacts(leg, contacts)
-    # The effector moves by its own offset, and otherwise by what its lower contacts ask.
-    low_w = weights[:, lower].sum(axis=1) if lower else np.zeros(len(local))
+    low_w = weights[:, lower].sum(axis=1) if lower else np.zeros(frames)
     low_offset = np.einsum("tk,tkd->td", weights[:, lower], anchors[:, lower]) / np.maximum(low_w, 1.0)[:, None] \
-        if lower else np.zeros((len(local), 3))
-    own_w = weights[:, top] if top is not None else np.zeros(len(local))
+        if lower else np.zeros((frames, 3))
+    own_w = weights[:, top] if top is not None else np.zeros(frames)
     own = anchors[:, top] * own_w[:, None] if top is not None else 0.0
-    shift = own + (1.0 - own_w)[:, None] * low_offset
-    active = (own_w > 0) | (low_w > 0)
+    return own + (1.0 - own_w)[:, None] * low_offset, (own_w > 0) | (low_w > 0)
+
+
+def hips_drop(legs: list[Leg], contacts: list[int], targets: _Targets, loop: bool = False) -> np.ndarray:
+    """(T,) how far (file units, along the up axis) to lower the hips so that every two-bone leg
+    reaches its pinned effector with the knee no straighter than sampled or than STRAIGHT_REACH
+    of the leg's reach; eased in and out over DROP_EASE frames, never less than needed."""
+    p, up = targets.positions, targets.up
+    need = np.zeros(len(p))
+    for leg in legs:
+        if leg.hip is None or leg.chain:
+            continue
+        shift, active = _effector_shift(leg, contacts, targets.anchors, targets.weights)
+        a, b, c = p[:, leg.hip], p[:, leg.knee], p[:, leg.effector]
+        reach = np.linalg.norm(b - a, axis=-1) + np.linalg.norm(c - b, axis=-1)
+        allowed = np.maximum(np.linalg.norm(c - a, axis=-1), STRAIGHT_REACH * reach)
+        apart = c + shift - a
+        height = -apart[:, up]  # the hip's height above the pin
+        apart[:, up] = 0.0
+        flat = np.linalg.norm(apart, axis=-1)
+        drop = height - np.sqrt(np.maximum(allowed**2 - flat**2, 0.0))
+        need = np.maximum(need, np.where(active, np.clip(drop, 0.0, MAX_DROP * reach), 0.0))
+    if not need.any():
+        return need
+    radius = int(math.ceil(2 * DROP_EASE))
+    padded = np.pad(need, radius, mode="wrap" if loop else "edge")
+    widened = np.lib.stride_tricks.sliding_window_view(padded, 2 * radius + 1).max(axis=1)
+    return np.maximum(need, smooth_frames(widened[None, :, None], DROP_EASE, wrap=loop)[0, :, 0])
+
+
+def lower_hips(animation: Animation, codec, drop: np.ndarray) -> None:
+    """Lower the trajectory joint by `drop` (T,) along the up axis, in place on the animation's translations."""
+    joint = codec.trajectory_joint
+    offset = np.zeros((len(drop), 3))
+    offset[:, codec.up_axis] = -drop
+    parent = animation.skeleton.parents[joint]
+    if parent >= 0:  # translations live in the parent's frame
+        glob, _ = chain_kinematics(animation.rotations, animation.translations, animation.skeleton.parents, [parent])
+        offset = np.einsum("tba,tb->ta", glob[:, 0], offset)
+    animation.translations[:, joint] += offset
+
+
+def _solve_leg(local: np.ndarray, translations: np.ndarray, parents: np.ndarray, leg: Leg, contacts: list[int],
+               targets: _Targets, free: np.ndarray | float = 1.0, aim: bool = True) -> None:
+    """Solve one leg in place on the local rotations (T, J, 3, 3); `free` (T,) scales the
+    offsets (0 where an application keeps the leg's pose); `aim`: the lower contacts are aimed
+    at their pins (off where the foot moves rigidly with its effector). Only `_leg_joints(leg)` change,
+    and only on frames where the leg has an offset to reach."""
+    anchors, weights = targets.anchors, targets.weights * np.reshape(free, (-1, 1))
+    lower = _lower_contacts(leg, contacts)
+    shift, active = _effector_shift(leg, contacts, anchors, weights)
     if not active.any():
         return
     e, k, h = leg.effector, leg.knee, leg.hip
@@ -412,7 +488,7 @@ def _solve_leg(local: np.ndarray, translations: np.ndarray, parents: np.ndarray,
         local[:, k] = _apply_world(local[:, k], parent_glob[k], total)
     if leg.keep_orientation:  # keep the effector's world orientation: the joints below translate rigidly
         local[:, e] = _apply_world(local[:, e], parent_glob[e], np.swapaxes(total, -1, -2))
-    for m, pivot in zip(lower, leg.pivots):
+    for m, pivot in zip(lower if aim else [], leg.pivots):
         if pivot is None:
             continue
         joint = contacts[m]
@@ -503,12 +579,17 @@ def cleanup_contacts(animation: Animation, codec, features: np.ndarray,
         return animation
     up = codec.up_axis
     parents = animation.skeleton.parents
+    translations_in = animation.translations
     positions = positions_by_chunks(animation.rotations, animation.translations, parents)
     limit = MAX_SLIDE * (codec.size if size is None else size) / codec.scale
+    reach = CONTACT_HEIGHT * (codec.size if size is None else size) / codec.scale
+    floors = _floor_heights(codec)
+    near = near_floor(positions[:, contacts], up, floors, reach)
+    inside = np.stack([contact_mask(np.where(near[:, k], labels[:, k], 0.0)) for k in range(len(contacts))], axis=1)
     inside = np.stack([drop_slides(inside[:, k], positions[:, j], up, limit) for k, j in enumerate(contacts)], axis=1)
     # A foot the model moves slower than the codec's contact speed is planted too, labelled
     # or not: the labels miss the ends of many contacts, and those frames slide visibly.
-    slow = contact_labels(positions[:, contacts] * codec.scale, animation.fps, codec.contact_speed).astype(bool)
+    slow = contact_labels(positions[:, contacts] * codec.scale, animation.fps, codec.contact_speed).astype(bool) & near
     inside = inside | np.stack([contact_mask(slow[:, k]) for k in range(len(contacts))], axis=1)
     if ROOT_CORRECTION and loop_displacement is None and keep is None:
         animation = slow_root(animation, codec, positions, inside, in_place)
@@ -520,14 +601,23 @@ def cleanup_contacts(animation: Animation, codec, features: np.ndarray,
     changed = list(dict.fromkeys(j for leg in legs for j in _leg_joints(leg)))
     original = animation.rotations[:, changed]
     local = animation.rotations if in_place else animation.rotations.copy()
+    # The hips are lowered where a leg cannot reach its pin; a guide's kept root is never moved.
+    root = codec.trajectory_joint if keep is None else None
+    if root is not None:
+        if not in_place and animation.translations is translations_in:
+            animation = Animation(animation.skeleton, animation.rotations, animation.translations.copy(), animation.fps)
+        hips = animation.translations[:, root].copy()
     for _ in range(GROW_PASSES + 1):
         local[:, changed] = original
-        _pin(animation, local, codec, legs, free, positions, inside, shift)
+        if root is not None:
+            animation.translations[:, root] = hips
+        _pin(animation, local, codec, legs, free, positions, inside, shift, lower=root is not None)
         # Pinning a joint slows its neighbours on the chain (a planted ankle drags the ball of
         # the foot): frames the cleaned motion moves slower than the contact speed are planted
-        # too, so the next pass pins them instead of letting them slide at the blend's speed.
+        # too, so the next pass pins them instead of letting them slide at the easing's speed.
         _, cleaned = chain_kinematics(local, animation.translations, parents, contacts)
         slow = contact_labels(cleaned * codec.scale, animation.fps, codec.contact_speed).astype(bool)
+        slow &= near_floor(cleaned, up, floors, reach)
         grown = inside | np.stack([contact_mask(slow[:, k]) for k in range(len(contacts))], axis=1)
         grown = np.stack([drop_slides(grown[:, k], positions[:, j], up, limit) for k, j in enumerate(contacts)], axis=1)
         if (grown == inside).all():
@@ -566,7 +656,7 @@ def _lift_from_floor(animation: Animation, local: np.ndarray, codec, legs: list[
         anchors[:, list(leg.contacts), up] = lift[:, None]
         weights[:, list(leg.contacts)] = (lift > 0)[:, None]
         targets = _Targets(positions, anchors, weights, up, np.full(len(contacts), -np.inf))
-        _solve_leg(local, animation.translations, animation.skeleton.parents, leg, contacts, targets, leg_free)
+        _solve_leg(local, animation.translations, animation.skeleton.parents, leg, contacts, targets, leg_free, aim=False)
 
 
 def _floor_heights(codec) -> np.ndarray | None:
@@ -575,8 +665,10 @@ def _floor_heights(codec) -> np.ndarray | None:
 
 
 def _pin(animation: Animation, local: np.ndarray, codec, legs: list[Leg], free: list, positions: np.ndarray,
-         inside: np.ndarray, shift: np.ndarray | None) -> None:
-    """Every leg solved, in place on `local` (T, J, 3, 3), for the contact frames `inside` (T, C)."""
+         inside: np.ndarray, shift: np.ndarray | None, lower: bool = False) -> None:
+    """Every leg solved, in place on `local` (T, J, 3, 3), for the contact frames `inside` (T, C);
+    `lower`: the hips lowered first (in place on the animation's translations) where a leg cannot
+    reach its pin (hips_drop)."""
     up, contacts = codec.up_axis, list(codec.contact_joints)
     anchors, weights = np.zeros((animation.frames, len(contacts), 3)), np.zeros((animation.frames, len(contacts)))
     # Each lower contact (a ball) below the planted joint that aims it (an ankle): pinned where that joint's pin carries it.
@@ -592,11 +684,15 @@ def _pin(animation: Animation, local: np.ndarray, codec, legs: list[Leg], free: 
                 anchors[:, k], weights[:, k] = contact_offsets(positions[:, contacts[k]], inside[:, k], carried=carried,
                                                                floor=floor)
             else:
-                anchors[:, k], weights[:, k] = _cyclic_offsets(positions[:, contacts[k]], inside[:, k], shift, BLEND_FRAMES,
+                anchors[:, k], weights[:, k] = _cyclic_offsets(positions[:, contacts[k]], inside[:, k], shift, EASE_FRAMES,
                                                                carried, floor)
     pinned = positions[:, contacts, up] + anchors[..., up]
     floors = np.where(inside, pinned, np.inf).min(axis=0)
     targets = _Targets(positions, anchors, weights, up, floors)
+    if lower:
+        drop = hips_drop(legs, contacts, targets, loop=shift is not None)
+        if drop.any():
+            lower_hips(animation, codec, drop)
     for leg, leg_free in zip(legs, free):
         _solve_leg(local, animation.translations, animation.skeleton.parents, leg, contacts, targets, leg_free)
 
