@@ -11,6 +11,7 @@ from pathlib import Path
 
 import pytest
 import torch
+from dataclasses import replace
 
 from sinmdm.runtime.bvh import BVH, read_bvh, write_bvh
 from sinmdm.train.checkpoint import load_config, load_state
@@ -42,6 +43,7 @@ def test_short_run_and_info(tiny_run):
     assert info["step"] == 10 and info["preset"] == "cpu" and info["finished"]
     assert info["clip"]["name"] == "stomper.bvh"
     assert info["window"] == 48 and info["receptive_field"] == 23
+    assert info["crop"] == {"frames": 48, "why": "random crops of 48 frames"}
     assert info["parameters"] > 0
     log = [json.loads(line) for line in (tiny_run / "log.jsonl").read_text().splitlines()]
     assert [entry["step"] for entry in log] == [10]
@@ -193,6 +195,36 @@ def test_cpu_preset_crops():
     sampler = BatchSampler(torch.randn(10, 300), config, torch.Generator().manual_seed(0))
     batch = sampler()
     assert batch.shape == (64, 10, 64) and not torch.equal(batch[0], batch[1])
+
+
+def test_cpu_preset_trains_a_short_clip_whole():
+    config = PRESETS["cpu"]
+    short = torch.randn(10, 90)
+    sampler = BatchSampler(short, config, torch.Generator().manual_seed(0))
+    batch = sampler()
+    assert sampler.window == 90 and batch.shape == (64, 10, 90) and all(torch.equal(b, short) for b in batch)
+    assert "the whole clip" in sampler.crop_why
+    longer = BatchSampler(torch.randn(10, 97), config, torch.Generator().manual_seed(0))
+    assert longer.window == 64 and longer.crop_why == "random crops of 64 frames"
+    asked = BatchSampler(short, replace(config, crop=48, whole_clip_frames=None), torch.Generator().manual_seed(0))
+    assert asked.window == 48
+
+
+def test_short_clip_trains_whole_and_an_explicit_crop_wins(tmp_path):
+    clip = read_bvh(DEMO_CLIP)
+    short = tmp_path / "short.bvh"
+    write_bvh(short, BVH(clip.skeleton, clip.frame_time, clip.values[:80].copy()))
+    common = ("--steps", "2", "--width", "32", "--batch", "2", "--check-every", "0", "--no-compile")
+    run_cli("sinmdm", "train", str(short), "--out", str(tmp_path / "whole"), *common, check=True)
+    assert load_config(tmp_path / "whole")["window"] == 80
+    shown = run_cli("sinmdm", "info", str(tmp_path / "whole"), check=True)
+    shown = shown.stdout + shown.stderr
+    assert "the whole clip" in shown
+    run_cli("sinmdm", "train", str(short), "--out", str(tmp_path / "crops"), *common, "--crop", "64", check=True)
+    assert load_config(tmp_path / "crops")["window"] == 64
+    refused = run_cli("sinmdm", "train", str(short), "--out", str(tmp_path / "crops"), *common[2:], "--steps", "4",
+                      "--resume", check=False)
+    assert refused.returncode == 2 and "64 frames at a time" in refused.stderr
 
 
 def test_paper_preset_runs_a_step(tmp_path):

@@ -40,7 +40,7 @@ def train(
     seed: int = typer.Option(0, "--seed"),
     resume: bool = typer.Option(False, "--resume", help="Continue the run in --out from its last (verified) checkpoint."),
     width: Optional[int] = typer.Option(None, "--width", help="Network width (paper: 256)."),
-    crop: Optional[int] = typer.Option(None, "--crop", help="Training crop length in frames (cpu preset: 64)."),
+    crop: Optional[int] = typer.Option(None, "--crop", help="Training crop length in frames (cpu preset: 64, and a clip of at most 96 frames trains whole; an explicit --crop applies to every clip)."),
     batch: Optional[int] = typer.Option(None, "--batch", help="Batch size (default 64)."),
     checkpoint_every: Optional[int] = typer.Option(None, "--checkpoint-every", help="Iterations between checkpoints."),
     fps: float = typer.Option(30.0, "--fps", help="Feature frame rate."),
@@ -95,6 +95,8 @@ def train(
         early_stop=False if steps else None, patience=patience,  # --steps forces a fixed budget: the watch still keeps the best
         loss_weighting=loss_weighting,
     )
+    if crop is not None:
+        config = replace(config, whole_clip_frames=None)
     if ema is not None:
         config = replace(config, ema=ema or None)
     if check_every is not None:
@@ -196,6 +198,7 @@ def info(
         "device": config["device"],
         "compiled": config.get("compiled"),
         "root_frame": config.get("root_frame"),
+        "crop": config.get("crop"),
         "train": config["train"],
         "model": config["model"],
         "watch": config.get("watch"),
@@ -213,6 +216,8 @@ def info(
     table.add_row("clip", f"{config['clip']['name']} ({config['clip']['frames']} frames, sha256 {config['clip']['sha256'][:12]})")
     chosen = config.get("root_frame") or {"frame": config["train"].get("root_frame", "world"), "why": "asked for"}
     table.add_row("root frame", f"{chosen['frame']} ({chosen['why']})")
+    if config.get("crop"):
+        table.add_row("training crop", config["crop"]["why"])
     if summary["compiled"]:
         table.add_row("compiled", f"{'yes' if summary['compiled']['on'] else 'no'}: {summary['compiled']['why']}")
     console.print(table)

@@ -12,6 +12,8 @@ class TrainConfig:
     steps: int
     batch: int = 64
     crop: int | None = None  # frames per training example; None = the whole clip
+    # a clip of at most this many frames trains whole even where `crop` is set (train.data.choose_crop)
+    whole_clip_frames: int | None = None
     rescale: tuple[float, float] | None = (0.75, 1.25)  # random time-rescale range per iteration
     lr: float = 1e-4
     lr_schedule: str = "exponential"  # "exponential" (gamma per step) | "linear-tail" (linear decay to 0 over the last `tail` share)
@@ -65,6 +67,7 @@ PRESETS = {
         preset="cpu",
         steps=2_800,
         crop=64,
+        whole_clip_frames=96,
         rescale=None,
         lr=2e-4,
         lr_schedule="linear-tail",

@@ -250,6 +250,7 @@ class Run:
             "bf16": self.autocast,
             "compiled": None if self.forward is None else {"on": self.forward.compiled, "why": self.forward.why},
             "window": self.sampler.window,
+            "crop": {"frames": self.sampler.crop, "why": self.sampler.crop_why},
             "receptive_field": self.receptive_field,
             "parameters": count_parameters(self.model),
             "schedule": {"name": "cosine", "timesteps": NUM_TIMESTEPS},
@@ -298,12 +299,17 @@ def _compatible(previous: dict, run: Run) -> None:
         raise SinMDMError(f"cannot resume: the run was trained on {previous['clip']['name']} (another file)")
     if previous["codec"] != json.loads(json.dumps(run.clip.codec.to_dict())):
         raise SinMDMError("cannot resume: the clip's feature encoding options differ from the run's")
-    # steps and early_stop are the budget, which --steps may change; fields a run predates take their defaults
-    before = dict(json.loads(json.dumps(TrainConfig.from_dict(previous["train"]).to_dict())), steps=None, early_stop=None)
-    now = dict(json.loads(json.dumps(run.config.to_dict())), steps=None, early_stop=None)
+    # steps and early_stop are the budget, which --steps may change; fields a run predates take their defaults;
+    # whole_clip_frames matters only through the window it gives, compared below (runs before it are resumable)
+    ignored = {"steps": None, "early_stop": None, "whole_clip_frames": None}
+    before = dict(json.loads(json.dumps(TrainConfig.from_dict(previous["train"]).to_dict())), **ignored)
+    now = dict(json.loads(json.dumps(run.config.to_dict())), **ignored)
     if before != now:
         changed = sorted(k for k in before if before.get(k) != now.get(k))
         raise SinMDMError(f"cannot resume: training configuration differs from the run's ({', '.join(changed)})")
+    if previous["window"] != run.sampler.window:
+        raise SinMDMError(f"cannot resume: the run trained on {previous['window']} frames at a time, this configuration "
+                          f"on {run.sampler.window}")
     if previous["seed"] != run.seed:
         raise SinMDMError(f"cannot resume: the run used seed {previous['seed']}, not {run.seed}")
 
