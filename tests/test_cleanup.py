@@ -12,7 +12,7 @@ import pytest
 from sinmdm.eval.plausibility import plausibility
 from sinmdm.runtime import SamplingOptions, generate, load_model, read_bvh
 from sinmdm.runtime.animation import Animation, animation_from_bvh, animation_to_bvh, global_positions
-from sinmdm.runtime.cleanup import cleanup_contacts, contact_intervals, contact_offsets
+from sinmdm.runtime.cleanup import cleanup_contacts, contact_intervals, contact_offsets, trim_fast_ends
 from sinmdm.runtime.features import MotionCodec, build_codec
 
 from .conftest import DEMO_CLIP, real_clip, run_cli
@@ -48,6 +48,18 @@ def test_intervals_and_fades():
     run = np.zeros(80, dtype=bool)
     run[35:45] = True
     assert contact_offsets(far, run)[1][[*range(5), *range(75, 80)]].max() == 0  # untouched far from the run
+
+
+def test_a_label_on_before_landing_or_after_lift_off_is_trimmed():
+    # x: a foot arriving at 0.2 a frame, resting on frames 4-9, leaving at 0.2 a frame
+    x = np.array([0.0, 0.2, 0.4, 0.6, 0.8, 0.8, 0.8, 0.8, 0.8, 0.81, 1.0, 1.2, 1.4])
+    positions = np.stack([x, np.zeros_like(x), np.zeros_like(x)], axis=1)
+    inside = np.zeros(len(x), dtype=bool)
+    inside[2:12] = True  # the label: on two frames early, two late
+    assert contact_intervals(trim_fast_ends(inside, positions, 0.05)) == [(4, 10)]
+    assert not trim_fast_ends(np.arange(len(x)) < 3, positions, 0.05).any()  # all in flight: no contact
+    still = np.zeros_like(positions)
+    assert (trim_fast_ends(inside, still, 0.05) == inside).all()
 
 
 def test_a_ball_under_a_planted_ankle_is_pinned_a_foot_away_from_it():

@@ -7,7 +7,8 @@ with numpy IK so that planted joints stop sliding:
 1. Intervals: runs of frames with label > 0.5 (unless the joint travels further than
    `MAX_SLIDE` over the run: a label on a swinging limb) or where the joint moves
    slower than the codec's contact speed, at least `MIN_CONTACT_FRAMES` long, and
-   never higher than `CONTACT_HEIGHT` above the joint's resting height.
+   never higher than `CONTACT_HEIGHT` above the joint's resting height; a labelled run's ends
+   where the joint still moves fast (`FAST_ENDS`) are left out.
    Inside a run the joint's target is its position averaged over the run, height
    included: a planted foot neither slides nor bobs (sampled feet rise and fall by
    about 10 cm/s while planted, 15x the crab clip's own: BENCHMARKS.md). A joint planted
@@ -73,6 +74,12 @@ GROW_PASSES = 2  # extra passes that pin the frames a pass slowed down (see clea
 # idle's foot was pinned 40 cm in the air and the knee jumped 13 cm in a frame when the pin moved
 # to the floor. In the clips 98-100 % of the frames their feet are slow on lie within it.
 CONTACT_HEIGHT = 0.05
+# A labelled run's first and last frames where the joint moves faster than this many times the
+# codec's contact speed are not planted: the label came on before the foot landed or stayed on
+# after it lifted, and pinning those frames held the foot back up to 15 cm, so that the knee
+# caught up by 35 degrees in a frame (a walk; the clip's own fastest is 13). At 1x the feet slid
+# more (Xia proud 0.22 -> 0.33 cm/s).
+FAST_ENDS = 2.0
 MAX_SLIDE = 0.25  # a "contact" over which the joint travels further (share of the character's size) is a label error
 # A leg with this many rotating joints above its effector (an arthropod's, not a human's hip-knee
 # or hip-joint-hip-knee) is solved as one chain by damped least squares: the smallest rotations
@@ -169,6 +176,24 @@ def drop_slides(inside: np.ndarray, positions: np.ndarray, up_axis: int, limit: 
     horizontal = [a for a in range(3) if a != up_axis]
     for start, stop in contact_intervals(inside, min_frames=1):
         if np.ptp(positions[start:stop][:, horizontal], axis=0).max() > limit:
+            out[start:stop] = False
+    return out
+
+
+def trim_fast_ends(inside: np.ndarray, positions: np.ndarray, limit: float) -> np.ndarray:
+    """`inside` (T,) with each run's first frames cut while the joint (positions (T, 3)) moves
+    on faster than `limit` per frame, and its last frames while it arrives faster: a label
+    switched on before the foot lands or left on after it lifts."""
+    out = inside.copy()
+    step = np.linalg.norm(np.diff(positions, axis=0), axis=-1)  # step[t]: frame t to t + 1
+    for start, stop in contact_intervals(inside, min_frames=1):
+        while start < stop and start < len(step) and step[start] > limit:
+            out[start] = False
+            start += 1
+        while stop > start and stop >= 2 and step[stop - 2] > limit:
+            out[stop - 1] = False
+            stop -= 1
+        if stop - start < MIN_CONTACT_FRAMES:
             out[start:stop] = False
     return out
 
@@ -587,6 +612,8 @@ def cleanup_contacts(animation: Animation, codec, features: np.ndarray,
     near = near_floor(positions[:, contacts], up, floors, reach)
     inside = np.stack([contact_mask(np.where(near[:, k], labels[:, k], 0.0)) for k in range(len(contacts))], axis=1)
     inside = np.stack([drop_slides(inside[:, k], positions[:, j], up, limit) for k, j in enumerate(contacts)], axis=1)
+    fast = FAST_ENDS * codec.contact_speed / animation.fps / codec.scale
+    inside = np.stack([trim_fast_ends(inside[:, k], positions[:, j], fast) for k, j in enumerate(contacts)], axis=1)
     # A foot the model moves slower than the codec's contact speed is planted too, labelled
     # or not: the labels miss the ends of many contacts, and those frames slide visibly.
     slow = contact_labels(positions[:, contacts] * codec.scale, animation.fps, codec.contact_speed).astype(bool) & near
