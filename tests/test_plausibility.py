@@ -110,6 +110,16 @@ def test_mixamo24_follows_the_papers_unit_rule(walk, tmp_path):
     assert np.array_equal(cm_labels, m_labels)
 
 
+def test_the_papers_protocol_is_chosen_only_where_its_unit_rule_reads_the_figure_right(walk):
+    from sinmdm.eval.balance import eval_preset
+    from .layouts import scaled, with_static_root, z_up
+
+    assert eval_preset(walk) == "mixamo24" and eval_preset(scaled(walk, 0.01)) == "mixamo24"  # cm and m
+    # Z-up under a static root: the Hips OFFSET y is 0, the rule would read the 1.8 m walk as 180 m
+    assert eval_preset(z_up(with_static_root(walk))) == "default"
+    assert eval_preset(read_bvh(real_clip("Xia_proud.bvh"))) == "default"  # not Mixamo names
+
+
 def test_a_recombination_of_the_clips_own_halves_is_not_called_backwards():
     """The crab's dance walks one way for its first 100 frames, back and forth for the next 170
     and stands for the rest: its middle played twice walks backwards far more often than the
