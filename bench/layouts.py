@@ -108,7 +108,7 @@ def main() -> None:
             row = {"tag": tag, "clip": name, "layout": layout or "as shared", "train_options": extra,
                    "train_steps": config["step"], "width": args.width, "train_wall_seconds": round(train_wall, 1),
                    "samples": args.samples, "frames": 2 * round(reference.frames / reference.fps * fps),
-                   "eval_preset": eval_protocol(name), "variants": {}, "date": time.strftime("%Y-%m-%d")}
+                   "eval_preset": eval_protocol(clip), "variants": {}, "date": time.strftime("%Y-%m-%d")}
             results.append(row)
         config = json.loads((run_dir / "config.json").read_text())
         model = load_model(run_dir / f"model_w{config['window']}.onnx")

@@ -19,7 +19,6 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 MOTIONS = ROOT.parent / "shared" / "motions"
-MIXAMO = ("Joe_",)  # clips scored with the paper's mixamo24 protocol
 # The paper's sampler (no edge margin, no foot cleanup) and what `sinmdm-run sample` does.
 SAMPLER_VARIANTS = {"faithful": {"margin": 0, "cleanup": False, "smooth": 0.0}, "default": {}}
 
@@ -29,8 +28,15 @@ def run(*args: str) -> None:
     subprocess.run([str(bin_dir / args[0]), *args[1:]], check=True)
 
 
-def eval_protocol(clip_name: str) -> str:
-    return "mixamo24" if clip_name.startswith(MIXAMO) else "default"
+def eval_protocol(clip: str | Path) -> str:
+    """The protocol a clip is scored with, as sinmdm chooses it (`eval.balance.eval_preset`: the
+    paper's mixamo24 for a Mixamo skeleton whose units its rule reads right). A bare file name is
+    a shared clip; a derived layout is passed as its path."""
+    from sinmdm.eval.balance import eval_preset
+    from sinmdm.runtime import read_bvh
+
+    path = Path(clip)
+    return eval_preset(read_bvh(MOTIONS / path if path.parent == Path(".") else path))
 
 
 def export_trained_window(run_dir: Path, window: int) -> Path:

@@ -81,7 +81,7 @@ def main() -> None:
             train_wall = config["elapsed_seconds"] if finished else time.perf_counter() - began
             path = export_trained_window(run_dir, config["window"])
             model = load_model(path)
-            steps, protocol = model.default_steps, eval_protocol(name)
+            steps, protocol = model.default_steps, eval_protocol(clip)
             frames = None
             rows = []
             for variant, options in SAMPLER_VARIANTS.items():
