@@ -86,6 +86,22 @@ def test_a_dip_on_a_few_frames_is_named_with_a_share_above_zero(walk):
     assert row["verdict"].startswith("sinks") and f"{100 * row['penetration_share']:.1f} % of frames" in row["verdict"]
 
 
+def test_feet_that_never_stop_are_named(walk):
+    """The legs held in one pose while the body travels as in the clip: the feet glide along with
+    it, never planted, yet there is nothing to skate on planted frames, no pace or turning change."""
+    names, channels = walk.skeleton.names, walk.skeleton.channels
+    start = np.cumsum([0, *(len(c) for c in channels)])
+    legs = [j for j, n in enumerate(names) if any(k in n for k in ("UpLeg", "Leg", "Foot", "Toe"))]
+    def freeze(values):
+        for j in legs:
+            values[:, start[j]:start[j + 1]] = values[0, start[j]:start[j + 1]]
+    row = plausibility(walk, [_edited(walk, freeze)])["samples"][0]
+    assert row["planted_share"] < 0.5 * row["clip_planted_share"]
+    assert row["verdict"].startswith("feet glide"), row["verdict"]
+    itself = plausibility(walk, [walk])["samples"][0]
+    assert itself["planted_share"] == itself["clip_planted_share"] and itself["verdict"] == "plausible"
+
+
 def test_eval_reports_plausibility(tmp_path, walk):
     sample = tmp_path / "s.bvh"
     write_bvh(sample, walk)
