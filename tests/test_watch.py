@@ -40,6 +40,17 @@ def test_balance_ranks_a_model_that_loses_the_clip_s_turning_below_one_that_keep
                         "turning_allowed_deg_s": 10.0})
 
 
+def test_balance_ranks_feet_that_glide_below_feet_that_plant():
+    # whole-clip Xia normal (2026-12-07): the frame-norm stage's best check (balance 1.05, its feet
+    # planted on 12 % of frames) against the GroupNorm stage's (0.81, 29 %); the clip's: 48 %
+    needed = 0.5 * 0.48
+    gliding = balance(100.0, 1.5898, 2.492, 3.56, 13.81, 0.016, 0.1, 0.12, needed)
+    planting = balance(100.0, 1.3113, 3.7, None, 10.0, None, 0.1, 0.29, needed)
+    assert gliding < planting
+    assert balance(100.0, 1.3113, None, planted_share=0.29, planted_needed=needed) == balance(100.0, 1.3113)
+    assert not in_band({"coverage": 100.0, "global_diversity": 1.59, "planted_share": 0.12, "planted_needed": needed})
+
+
 def test_balance_ranks_the_paper_above_copying_and_drifting():
     assert balance(*PAPER_ROW) > balance(*DRIFTING_ROW) and balance(*PAPER_ROW) > balance(*COPYING_ROW)
     # The table (coverage, global, local): the paper's harmonic mean (maxima = the
