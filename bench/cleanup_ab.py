@@ -28,6 +28,11 @@ from sinmdm.runtime.cleanup import find_legs
 STRAIGHT_DEG = 179.0
 
 
+def two_bone_legs(animation, codec) -> list:
+    """The legs the cleanup solves with a hip and a knee (not a many-jointed chain)."""
+    return [leg for leg in find_legs(animation, codec, global_positions(animation)) if leg.hip is not None and not leg.chain]
+
+
 def knee_angles(animation, legs) -> np.ndarray:
     """(T, legs) the angle at each two-bone leg's knee, degrees (180 = straight)."""
     p = global_positions(animation)
@@ -78,7 +83,7 @@ def main() -> None:
     reference = read_bvh(args.clip)
     protocol = eval_preset(reference)
     clip = animation_from_bvh(reference)
-    legs = [leg for leg in find_legs(clip, model.codec, global_positions(clip)) if leg.hip is not None and not leg.chain]
+    legs = two_bone_legs(clip, model.codec)
     own = knee_angles(clip, legs)
     rows = []
     for cleanup in ([False] if args.off else []) + [True]:

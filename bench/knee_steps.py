@@ -19,17 +19,15 @@ import numpy as np
 # Appended, not prepended: a PYTHONPATH pointing at another checkout's sinmdm still wins.
 sys.path.append(str(Path(__file__).resolve().parents[1]))
 
-from bench.cleanup_ab import knee_angles  # noqa: E402
+from bench.cleanup_ab import knee_angles, two_bone_legs  # noqa: E402
 from sinmdm.runtime import SamplingOptions, generate, load_model, read_bvh  # noqa: E402
-from sinmdm.runtime.animation import animation_from_bvh, global_positions  # noqa: E402
-from sinmdm.runtime.cleanup import find_legs  # noqa: E402
+from sinmdm.runtime.animation import animation_from_bvh  # noqa: E402
 from sinmdm.runtime.features import resample_animation  # noqa: E402
 
 
 def steps(animation, codec) -> np.ndarray:
     """(T-1, legs) each two-bone knee's angle change per frame, degrees."""
-    legs = [leg for leg in find_legs(animation, codec, global_positions(animation)) if leg.hip is not None and not leg.chain]
-    return np.abs(np.diff(knee_angles(animation, legs), axis=0))
+    return np.abs(np.diff(knee_angles(animation, two_bone_legs(animation, codec)), axis=0))
 
 
 def summary(values: list[np.ndarray]) -> dict:

@@ -33,11 +33,10 @@ from ..runtime.bvh import BVH
 from ..runtime.errors import SinMDMError
 from ..runtime.generate import generate
 from ..runtime.model import MotionModel
-from ..runtime.features import skeleton_size
 from ..runtime.options import SamplingOptions
 from ..runtime.rig import PLAUSIBLE_HUMANOID_METRES
 from . import metrics
-from .motion_features import MIXAMO24_JOINTS, eval_features, paper_scale, protocol_for, resolve_joints
+from .motion_features import eval_features, protocol_for
 from .plausibility import (JITTER_RATIO, PACE_FLOOR_M_S, PLANTED_RATIO, TELEPORT_RATIO, TURN_FLOOR_DEG_S, pace_allowed, plausibility,
                            turning_allowed)
 
@@ -117,11 +116,10 @@ def eval_preset(reference: BVH) -> str:
     figure as 180 m, so that only feet the cleanup holds exactly still counted as planted, and
     cleaned samples scored 1.51 in global diversity where raw ones scored 0.89 (BENCHMARKS.md)."""
     try:
-        resolve_joints(reference.skeleton, MIXAMO24_JOINTS, "contains")
+        size = protocol_for(reference, "mixamo24").character_size
     except SinMDMError:
         return "default"
     low, high = PLAUSIBLE_HUMANOID_METRES
-    size = skeleton_size(reference.skeleton) * paper_scale(reference.skeleton)
     return "mixamo24" if low <= size <= high else "default"
 
 

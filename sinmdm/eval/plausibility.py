@@ -167,15 +167,12 @@ def planted(t: Track, contacts: list[int], speed: float, up: int, floor: float, 
     return contact_labels(feet, FPS, speed).astype(bool) & (feet[..., up] - floor < 0.05 * size)
 
 
-def planted_speeds_cm_s(t: Track, contacts: list[int], speed: float, up: int, floor: float,
-                        size: float) -> tuple[float, float]:
+def planted_speeds_cm_s(t: Track, contacts: list[int], still: np.ndarray, up: int) -> tuple[float, float]:
     """Mean horizontal (skating) and vertical (bobbing) speed of the contact joints on the
-    frames where they are planted: slow by the contact rule and near the clip's floor."""
+    frames where they are planted (`still`, from `planted`)."""
     if not contacts:
         return 0.0, 0.0
-    feet = t.positions[:, contacts]
-    still = planted(t, contacts, speed, up, floor, size)
-    velocity = np.diff(feet, axis=0) * FPS
+    velocity = np.diff(t.positions[:, contacts], axis=0) * FPS
     still = still[1:] & still[:-1]
     if not still.any():
         return 0.0, 0.0
@@ -183,9 +180,9 @@ def planted_speeds_cm_s(t: Track, contacts: list[int], speed: float, up: int, fl
     return float(horizontal[still].mean() * 100), float(np.abs(velocity[..., up])[still].mean() * 100)
 
 
-def planted_share(t: Track, contacts: list[int], speed: float, up: int, floor: float, size: float) -> float:
-    """The share of frames the contact joints are planted (over joints and frames)."""
-    return float(planted(t, contacts, speed, up, floor, size).mean()) if contacts else 0.0
+def share(mask: np.ndarray) -> float:
+    """The share of True in `mask` (0 when it is empty: a clip without contacts)."""
+    return float(mask.mean()) if mask.size else 0.0
 
 
 def jerk(t: Track) -> float:
@@ -241,7 +238,8 @@ def reference_figures(ref: Track, codec: MotionCodec, contacts: list[int]) -> Re
     up = codec.up_axis
     floor = float(np.percentile(ref.positions[..., up].min(axis=1), 2))
     forward = forward_axis(ref, up)
-    skating, bob = planted_speeds_cm_s(ref, contacts, codec.contact_speed, up, floor, codec.size)
+    still = planted(ref, contacts, codec.contact_speed, up, floor, codec.size)
+    skating, bob = planted_speeds_cm_s(ref, contacts, still, up)
     axis = horizontal_axis(ref.root_rotations[1:], up) if forward is None else forward
     heading = headings(ref, axis, up)
     turning = turning_rates(heading)
@@ -250,7 +248,7 @@ def reference_figures(ref: Track, codec: MotionCodec, contacts: list[int]) -> Re
     return Reference(codec=codec, contacts=contacts, floor=floor, joint_floors=joint_floors(ref, floor, up),
                      forward=forward, steps=root_steps(ref), speeds=_speeds(ref, up), paces=pace,
                      pace_halves_m_s=wasserstein_1d(pace[:len(pace) // 2], pace[len(pace) // 2:]), skating_cm_s=skating, bob_cm_s=bob,
-                     planted_share=planted_share(ref, contacts, codec.contact_speed, up, floor, codec.size),
+                     planted_share=share(still),
                      backward_share=backward_share(ref, forward, up),
                      backward_half_max=most_backward_half(ref, forward, up), heading_axis=axis, turning=turning,
                      turning_halves_deg_s=wasserstein_1d(turning[:half], turning[half:]),
@@ -262,7 +260,8 @@ def score_sample(ref: Reference, sample: Track) -> dict:
     up, size = codec.up_axis, codec.size
     steps = root_steps(sample)
     floor_step = STEP_FLOOR * size
-    skate, bob = planted_speeds_cm_s(sample, ref.contacts, codec.contact_speed, up, ref.floor, size)
+    still = planted(sample, ref.contacts, codec.contact_speed, up, ref.floor, size)
+    skate, bob = planted_speeds_cm_s(sample, ref.contacts, still, up)
     depth = ref.joint_floors - sample.positions[..., up]
     heading = headings(sample, ref.heading_axis, up)
     turning = turning_rates(heading)
@@ -294,7 +293,7 @@ def score_sample(ref: Reference, sample: Track) -> dict:
         "clip_foot_skating_cm_s": ref.skating_cm_s,
         "foot_bob_cm_s": bob,
         "clip_foot_bob_cm_s": ref.bob_cm_s,
-        "planted_share": planted_share(sample, ref.contacts, codec.contact_speed, up, ref.floor, size),
+        "planted_share": share(still),
         "clip_planted_share": ref.planted_share,
         "penetration_cm": float(depth[below].mean() * 100) if below.any() else 0.0,
         "penetration_share": float(below.any(axis=1).mean()),

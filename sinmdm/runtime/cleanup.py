@@ -220,7 +220,6 @@ def contact_offsets(positions: np.ndarray, inside: np.ndarray, ease: float = EAS
     `floor` (up axis, height): no pin lies below that height (the joint's resting height in
     the clip): a model that samples a planted foot low would otherwise pin it in the floor."""
     frames = len(positions)
-    index = np.arange(frames)
     runs = np.cumsum(np.diff(np.concatenate([[False], inside]).astype(np.int8)) == 1) * inside  # 1.. per run, 0 outside
     means, _ = _run_means(runs, positions, np.ones(frames, dtype=bool), runs.max() + 1)
     if carried is not None:
