@@ -144,10 +144,16 @@ def test_bad_root_frame_options_are_refused_before_training(tmp_path):
     clip = str(real_clip("Joe_Walk-In-Circle.bvh"))
     bad = call_cli("sinmdm", "train", clip, "--out", str(tmp_path / "a"), "--root-frame", "body", "--steps", "2")
     assert bad.returncode == 2 and "--root-frame" in bad.stdout + bad.stderr
-    foot = call_cli("sinmdm", "train", clip, "--out", str(tmp_path / "b"), "--root-frame", "heading", "--foot-loss", "1",
-                    "--steps", "2", *TINY_TRAIN_ARGS)
-    assert foot.returncode == 2 and "--foot-loss" in foot.stdout + foot.stderr
-    assert not (tmp_path / "b" / "checkpoint.pt").exists()
+
+
+def test_the_foot_loss_trains_in_the_heading_frame(tmp_path):
+    clip = str(real_clip("Joe_Walk-In-Circle.bvh"))
+    call_cli("sinmdm", "train", clip, "--out", str(tmp_path / "b"), "--root-frame", "heading", "--foot-loss", "0.001",
+             "--foot-loss-target", "clip", "--steps", "2", *TINY_TRAIN_ARGS, check=True)
+    shown = call_cli("sinmdm", "info", str(tmp_path / "b"), "--json", check=True)
+    summary = json.loads(shown.stdout)
+    assert summary["root_frame"]["frame"] == "heading" and summary["foot_loss"]["on"]
+    assert "matched to the clip's" in summary["foot_loss"]["why"]
 
 
 @pytest.mark.parametrize("frames, turns", [(100, 0), (400, 1), (1300, 4)])

@@ -15,8 +15,8 @@ from dataclasses import replace
 
 from sinmdm.runtime.bvh import BVH, read_bvh, write_bvh
 from sinmdm.train.checkpoint import load_config, load_state
-from sinmdm.train.data import BatchSampler
-from sinmdm.train.presets import PRESETS
+from sinmdm.train.data import BatchSampler, crop_starts
+from sinmdm.train.presets import PRESETS, TrainConfig
 from sinmdm.train.trainer import resolve_device
 
 from .conftest import DEMO_CLIP, TINY_TRAIN_ARGS, needs_compiler, run_cli
@@ -43,7 +43,7 @@ def test_short_run_and_info(tiny_run):
     assert info["step"] == 10 and info["preset"] == "cpu" and info["finished"]
     assert info["clip"]["name"] == "stomper.bvh"
     assert info["window"] == 48 and info["receptive_field"] == 23
-    assert info["crop"] == {"frames": 48, "why": "random crops of 48 frames"}
+    assert info["crop"] == {"frames": 48, "why": "random crops of 48 frames, starts up to 0.25 of a crop off the clip's ends"}
     assert info["parameters"] > 0
     log = [json.loads(line) for line in (tiny_run / "log.jsonl").read_text().splitlines()]
     assert [entry["step"] for entry in log] == [10]
@@ -197,6 +197,22 @@ def test_cpu_preset_crops():
     assert batch.shape == (64, 10, 64) and not torch.equal(batch[0], batch[1])
 
 
+def test_crop_starts_reach_the_clip_ends():
+    frames, length = 632, 64
+    counts = {}
+    for edges in (0.0, 0.25):
+        starts = crop_starts(frames, length, edges, 200_000, torch.Generator().manual_seed(0))
+        assert int(starts.min()) == 0 and int(starts.max()) == frames - length
+        counts[edges] = torch.bincount(starts, minlength=frames - length + 1).double()
+    # the crop at each end drawn 1 + 16 times as often as one in the middle; the middle stays uniform
+    middle = counts[0.25][100:400].mean()
+    assert abs(counts[0.25][0] / middle - 17) < 1.5 and abs(counts[0.25][-1] / middle - 17) < 1.5
+    assert abs(counts[0.0][0] / counts[0.0][100:400].mean() - 1) < 0.2
+    # an old run's config (no crop_edges) keeps uniform starts, so it resumes bit for bit
+    old = {k: v for k, v in PRESETS["cpu"].to_dict().items() if k != "crop_edges"}
+    assert TrainConfig.from_dict(old).crop_edges == 0.0 and PRESETS["cpu"].crop_edges == 0.25
+
+
 def test_cpu_preset_trains_a_short_clip_whole():
     config = PRESETS["cpu"]
     short = torch.randn(10, 90)
@@ -205,7 +221,7 @@ def test_cpu_preset_trains_a_short_clip_whole():
     assert sampler.window == 90 and batch.shape == (64, 10, 90) and all(torch.equal(b, short) for b in batch)
     assert "the whole clip" in sampler.crop_why
     longer = BatchSampler(torch.randn(10, 97), config, torch.Generator().manual_seed(0))
-    assert longer.window == 64 and longer.crop_why == "random crops of 64 frames"
+    assert longer.window == 64 and longer.crop_why.startswith("random crops of 64 frames")
     asked = BatchSampler(short, replace(config, crop=48, whole_clip_frames=None), torch.Generator().manual_seed(0))
     assert asked.window == 48
 
@@ -236,3 +252,16 @@ def test_paper_preset_runs_a_step(tmp_path):
 
 def test_device_auto_is_cpu_here():
     assert resolve_device("auto").type == ("cuda" if torch.cuda.is_available() else "cpu")
+
+
+def test_the_foot_loss_is_off_where_a_clip_has_no_contacts_and_refused_when_asked(tmp_path):
+    from sinmdm.runtime.errors import SinMDMError
+    from sinmdm.train.trainer import train as run_training
+
+    config = replace(PRESETS["cpu"], steps=1, width=32, batch=2, check_every=None, foot_loss=0.001, foot_loss_target="clip")
+    result = run_training(DEMO_CLIP, tmp_path / "quiet", config, codec_options={"contacts": []}, compile_mode="off")
+    assert result["foot_loss"] == {"on": False, "why": "off: the clip has no contact joints or no trajectory joint to hold"}
+    with pytest.raises(SinMDMError, match="--foot-loss: the clip has no contact joints"):
+        run_training(DEMO_CLIP, tmp_path / "asked", config, codec_options={"contacts": []}, compile_mode="off",
+                     foot_loss_asked=True)
+    assert not (tmp_path / "asked").exists()

@@ -41,6 +41,7 @@ def train(
     resume: bool = typer.Option(False, "--resume", help="Continue the run in --out from its last (verified) checkpoint."),
     width: Optional[int] = typer.Option(None, "--width", help="Network width (paper: 256)."),
     crop: Optional[int] = typer.Option(None, "--crop", help="Training crop length in frames (cpu preset: 64, and a clip of at most 96 frames trains whole; an explicit --crop applies to every clip)."),
+    crop_edges: Optional[float] = typer.Option(None, "--crop-edges", help="How far, as a share of the crop, crop starts may fall off the clip's ends before being clamped in (cpu preset: 0.25, so the clip's first and last frames are trained on about as often as the middle; 0: uniform starts)."),
     batch: Optional[int] = typer.Option(None, "--batch", help="Batch size (default 64)."),
     checkpoint_every: Optional[int] = typer.Option(None, "--checkpoint-every", help="Iterations between checkpoints."),
     fps: float = typer.Option(30.0, "--fps", help="Feature frame rate."),
@@ -60,7 +61,8 @@ def train(
     compile: Optional[bool] = typer.Option(None, "--compile/--no-compile", help="Train through torch.compile (default: when the run has 600 steps or more on a CPU or CUDA device; about 1.4x faster after some 45 s of compiling; falls back to eager if compiling fails)."),
     ema: Optional[float] = typer.Option(None, "--ema", help="Decay of the weights' moving average that is checked and exported (cpu preset: 0.999, reached after some 9,000 steps of warm-up; 0 = no average, the raw weights).", show_default=False),
     loss_weighting: Optional[str] = typer.Option(None, "--loss-weighting", help="Loss weight over the noise level: uniform (the paper) or min-snr (min(SNR, 5), mean 1; see BENCHMARKS.md)."),
-    foot_loss: Optional[float] = typer.Option(None, "--foot-loss", help="Weight of a foot-contact loss (the clip's planted joints kept still in the prediction, by forward kinematics; 0 = the paper's loss alone; see BENCHMARKS.md)."),
+    foot_loss: Optional[float] = typer.Option(None, "--foot-loss", help="Weight of a foot-contact loss on the prediction's contact joints, by forward kinematics (0 = the paper's loss alone; what it holds them to: --foot-loss-target; measured weights per clip in BENCHMARKS.md)."),
+    foot_loss_target: Optional[str] = typer.Option(None, "--foot-loss-target", help="What the foot-contact loss holds the contact joints to: 'still' (the clip's planted joints kept still, MDM's) or 'clip' (their velocity on every frame matched to the clip's, weighted by the noise level's share of signal)."),
 ) -> None:
     """Train a denoiser on one clip."""
     _require_torch()
@@ -71,6 +73,7 @@ def train(
     from ..train.checkpoint import CONFIG
     from ..runtime.features import VELOCITY_UNITS
     from ..train.diffusion import LOSS_WEIGHTINGS
+    from ..train.foot_loss import FOOT_LOSS_TARGETS
     from ..train.model import NORM_KINDS
     from ..train.presets import preset as get_preset
     from ..train.trainer import ROOT_FRAME_CHOICES, kept_sampling, resumed_budget, train as run_training
@@ -83,15 +86,19 @@ def train(
         raise SinMDMError(f"--root-frame must be {', '.join(ROOT_FRAME_CHOICES)}, got '{root_frame}'")
     if foot_loss is not None and not (foot_loss >= 0 and math.isfinite(foot_loss)):
         raise SinMDMError(f"--foot-loss must be 0 or a positive number, got {foot_loss}")
+    if foot_loss_target is not None and foot_loss_target not in FOOT_LOSS_TARGETS:
+        raise SinMDMError(f"unknown --foot-loss-target {foot_loss_target!r}: use {' or '.join(FOOT_LOSS_TARGETS)}")
     if ema is not None and not 0 <= ema < 1:
         raise SinMDMError(f"--ema must be 0 (no average) or a decay below 1, got {ema}")
     if loss_weighting is not None and loss_weighting not in LOSS_WEIGHTINGS:
         raise SinMDMError(f"--loss-weighting must be {' or '.join(LOSS_WEIGHTINGS)}, got '{loss_weighting}'")
+    if crop_edges is not None and not 0 <= crop_edges <= 1:
+        raise SinMDMError(f"--crop-edges must be a share of the crop from 0 to 1, got {crop_edges}")
     if check_every is not None and check_every < 0:
         raise SinMDMError(f"--check-every must be 0 (never) or more, got {check_every}")
     config = get_preset(preset).with_overrides(
-        steps=steps, width=width, crop=crop, batch=batch, checkpoint_every=checkpoint_every, fps=fps, norm=norm,
-        velocity_unit=velocity_unit, root_frame=root_frame, foot_loss=foot_loss, check_cleanup=check_cleanup,
+        steps=steps, width=width, crop=crop, crop_edges=crop_edges, batch=batch, checkpoint_every=checkpoint_every, fps=fps, norm=norm,
+        velocity_unit=velocity_unit, root_frame=root_frame, foot_loss=foot_loss, foot_loss_target=foot_loss_target, check_cleanup=check_cleanup,
         early_stop=False if steps else None, patience=patience,  # --steps forces a fixed budget: the watch still keeps the best
         loss_weighting=loss_weighting,
     )
@@ -126,7 +133,8 @@ def train(
     try:
         result = run_training(clip, out, config, seed=seed, device=device, resume=resume,
                               codec_options=codec_options, on_progress=on_progress, on_check=on_check,
-                              compile_mode="auto" if compile is None else ("on" if compile else "off"))
+                              compile_mode="auto" if compile is None else ("on" if compile else "off"),
+                              foot_loss_asked=bool(foot_loss))
         progress.update(task, completed=result["step"])
     finally:
         if progress.live.is_started:
@@ -199,6 +207,7 @@ def info(
         "compiled": config.get("compiled"),
         "root_frame": config.get("root_frame"),
         "crop": config.get("crop"),
+        "foot_loss": config.get("foot_loss"),
         "train": config["train"],
         "model": config["model"],
         "watch": config.get("watch"),
@@ -218,6 +227,8 @@ def info(
     table.add_row("root frame", f"{chosen['frame']} ({chosen['why']})")
     if config.get("crop"):
         table.add_row("training crop", config["crop"]["why"])
+    if config.get("foot_loss"):
+        table.add_row("foot-contact loss", config["foot_loss"]["why"])
     if summary["compiled"]:
         table.add_row("compiled", f"{'yes' if summary['compiled']['on'] else 'no'}: {summary['compiled']['why']}")
     console.print(table)

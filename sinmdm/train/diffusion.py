@@ -72,9 +72,9 @@ class GaussianDiffusion:
 
     def training_loss(self, model: nn.Module, x0: Tensor, t: Tensor | None = None,
                       noise: Tensor | None = None, generator: torch.Generator | None = None,
-                      extra: Callable[[Tensor, Tensor], Tensor] | None = None) -> Tensor:
+                      extra: Callable[[Tensor, Tensor, Tensor], Tensor] | None = None) -> Tensor:
         """Mean squared error of the x0 prediction over all elements (scalar), plus
-        `extra(prediction, x0)` when given (a geometric term, e.g. train.foot_loss)."""
+        `extra(prediction, x0, t)` when given (a geometric term, e.g. train.foot_loss)."""
         if t is None:
             t = self.sample_timesteps(x0.shape[0], generator=generator, device=x0.device)
         if noise is None:
@@ -85,4 +85,4 @@ class GaussianDiffusion:
         else:
             per_example = ((prediction - x0) ** 2).flatten(1).mean(dim=1)
             loss = (self.loss_weighting(t).to(per_example) * per_example).mean()
-        return loss if extra is None else loss + extra(prediction, x0)
+        return loss if extra is None else loss + extra(prediction, x0, t)

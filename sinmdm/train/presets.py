@@ -14,6 +14,10 @@ class TrainConfig:
     crop: int | None = None  # frames per training example; None = the whole clip
     # a clip of at most this many frames trains whole even where `crop` is set (train.data.choose_crop)
     whole_clip_frames: int | None = None
+    # crop starts may fall this share of the crop off either end of the clip, then are clamped in
+    # (train.data.crop_starts): 0 = uniform starts, under which the clip's first and last frames are
+    # almost never trained on
+    crop_edges: float = 0.0
     rescale: tuple[float, float] | None = (0.75, 1.25)  # random time-rescale range per iteration
     lr: float = 1e-4
     lr_schedule: str = "exponential"  # "exponential" (gamma per step) | "linear-tail" (linear decay to 0 over the last `tail` share)
@@ -39,6 +43,9 @@ class TrainConfig:
     check_cleanup: bool = False
     loss_weighting: str = "uniform"  # over t: "uniform" (the paper) | "min-snr" (train.diffusion.min_snr_weighting)
     foot_loss: float = 0.0  # weight of the foot-contact loss (train/foot_loss.py; 0 = the paper's loss alone)
+    # "still": the clip's planted joints held still (MDM's); "clip": every contact joint's velocity
+    # matched to the clip's, weighted by the noise level's share of signal
+    foot_loss_target: str = "still"
     velocity_unit: str = "frame"  # the root velocity channels in metres per "frame" (paper) or "second" (runtime.features.model_scale)
     # the trajectory joint seen in the "world" (paper) or from its "heading" (runtime.heading);
     # "auto": the heading for a clip that turns steadily, the world otherwise (trainer.choose_root_frame)
@@ -68,6 +75,7 @@ PRESETS = {
         steps=2_800,
         crop=64,
         whole_clip_frames=96,
+        crop_edges=0.25,
         rescale=None,
         lr=2e-4,
         lr_schedule="linear-tail",

@@ -98,19 +98,26 @@ def choose_root_frame(clip: ClipData, config: TrainConfig, heading: HeadingFrame
     if config.root_frame == "heading":
         if heading is None:
             raise SinMDMError("--root-frame heading needs a trajectory joint with rotation channels; this clip has none")
-        if config.foot_loss > 0:
-            raise SinMDMError("--foot-loss works on world-frame features: it cannot be combined with --root-frame heading")
     if config.root_frame != "auto":
         return config.root_frame, "asked for"
     if heading is None:
         return "world", "auto: the clip has no trajectory joint with rotation channels"
-    if config.foot_loss > 0:
-        return "world", "auto: the foot-contact loss works on world-frame features"
     headings = heading.headings(np.asarray(clip.features, dtype=np.float64))
     rate = float(np.degrees(headings[-1] - headings[0]) / max((len(headings) - 1) / clip.codec.fps, 1e-9))
     if abs(rate) > AUTO_HEADING_DEG_S:
         return "heading", f"auto: the clip turns {rate:+.1f} deg/s on average, more than {AUTO_HEADING_DEG_S:g}"
     return "world", f"auto: the clip turns {rate:+.1f} deg/s on average, not more than {AUTO_HEADING_DEG_S:g}"
+
+
+def foot_loss_choice(codec, config: TrainConfig) -> str:
+    """Whether the foot-contact loss trains this clip ("on: ..." or "off: ..."), and why. A clip
+    without contact joints or a trajectory joint trains without it, as the paper's loss."""
+    if config.foot_loss <= 0:
+        return "off: the paper's loss alone"
+    if codec.trajectory_joint is None or not codec.contact_joints:
+        return "off: the clip has no contact joints or no trajectory joint to hold"
+    what = "contact joints' velocity matched to the clip's" if config.foot_loss_target == "clip" else "planted joints held still"
+    return f"on: weight {config.foot_loss:g}, the {what}"
 
 
 def graph_metadata(clip: ClipData, config: TrainConfig) -> dict:
@@ -167,8 +174,11 @@ class Run:
         self.generator = torch.Generator().manual_seed(seed)
         clip_tensor = torch.from_numpy(np.ascontiguousarray(space.to_graph(clip.features).T, dtype=np.float32))
         self.sampler = BatchSampler(clip_tensor, config, self.generator)
-        foot = FootContactLoss(clip.codec, space.scale) if config.foot_loss > 0 else None
-        self.extra_loss = None if foot is None else (lambda prediction, x0: config.foot_loss * foot(prediction, x0))
+        self.foot_loss_why = foot_loss_choice(clip.codec, config)
+        foot = None
+        if self.foot_loss_why.startswith("on"):
+            foot = FootContactLoss(clip.codec, space.scale, heading=space.heading is not None)
+        self.extra_loss = None if foot is None else self._foot_term(foot, config)
         self.step = 0
         self.watch = WatchState()
         self.stopped: str | None = None  # why the watch ended the run early
@@ -182,6 +192,13 @@ class Run:
         self.forward: Forward | None = None  # chosen at the first step (compiled.py)
 
     # ------------------------------------------------------------- state
+    def _foot_term(self, foot: FootContactLoss, config: TrainConfig):
+        weight = config.foot_loss
+        if config.foot_loss_target == "still":
+            return lambda prediction, x0, t: weight * foot(prediction, x0)
+        abar = torch.as_tensor(self.diffusion.alphas_cumprod, dtype=torch.float32)
+        return lambda prediction, x0, t: weight * foot(prediction, x0, abar.to(t.device)[t])
+
     def state(self) -> dict:
         state = {
             "step": self.step,
@@ -251,6 +268,7 @@ class Run:
             "compiled": None if self.forward is None else {"on": self.forward.compiled, "why": self.forward.why},
             "window": self.sampler.window,
             "crop": {"frames": self.sampler.crop, "why": self.sampler.crop_why},
+            "foot_loss": {"on": self.extra_loss is not None, "why": self.foot_loss_why},
             "receptive_field": self.receptive_field,
             "parameters": count_parameters(self.model),
             "schedule": {"name": "cosine", "timesteps": NUM_TIMESTEPS},
@@ -349,9 +367,11 @@ def train(
     on_progress: Callable[[int, int, float, float], None] | None = None,
     on_check: Callable[[int, dict, int], None] | None = None,
     compile_mode: str = "auto",
+    foot_loss_asked: bool = False,
 ) -> dict:
     """Train (or resume) a run; returns the final run config. `compile_mode`: auto, on or
-    off (compiled.py)."""
+    off (compiled.py). `foot_loss_asked`: the foot-contact loss was asked for by name, so a
+    clip it cannot train is refused instead of trained without it."""
     run_dir = Path(run_dir)
     codec_options = codec_options or {}
     if compile_mode not in COMPILE_CHOICES:
@@ -365,6 +385,8 @@ def train(
         raise SinMDMError(f"--resume: {run_dir} holds no run to continue (no {CONFIG})")
     clip = load_clip(Path(clip_path), config.fps, codec_options)
     run = Run(clip, config, seed, resolve_device(device), compile_mode)
+    if foot_loss_asked and run.extra_loss is None and config.foot_loss > 0:
+        raise SinMDMError(f"--foot-loss: {run.foot_loss_why.removeprefix('off: ')}")
     if has_run:
         previous = load_config(run_dir)
         _compatible(previous, run)
