@@ -43,7 +43,7 @@ def test_short_run_and_info(tiny_run):
     assert info["step"] == 10 and info["preset"] == "cpu" and info["finished"]
     assert info["clip"]["name"] == "stomper.bvh"
     assert info["window"] == 48 and info["receptive_field"] == 23
-    assert info["crop"] == {"frames": 48, "why": "random crops of 48 frames, starts up to 0.25 of a crop off the clip's ends"}
+    assert info["crop"] == {"frames": 48, "why": "random crops of 48 frames"}
     assert info["parameters"] > 0
     log = [json.loads(line) for line in (tiny_run / "log.jsonl").read_text().splitlines()]
     assert [entry["step"] for entry in log] == [10]
@@ -210,7 +210,9 @@ def test_crop_starts_reach_the_clip_ends():
     assert abs(counts[0.0][0] / counts[0.0][100:400].mean() - 1) < 0.2
     # an old run's config (no crop_edges) keeps uniform starts, so it resumes bit for bit
     old = {k: v for k, v in PRESETS["cpu"].to_dict().items() if k != "crop_edges"}
-    assert TrainConfig.from_dict(old).crop_edges == 0.0 and PRESETS["cpu"].crop_edges == 0.25
+    assert TrainConfig.from_dict(old).crop_edges == 0.0 and PRESETS["cpu"].crop_edges == 0.0
+    reaching = BatchSampler(torch.randn(10, 300), replace(PRESETS["cpu"], crop_edges=0.25), torch.Generator().manual_seed(0))
+    assert reaching.crop_why == "random crops of 64 frames, starts up to 0.25 of a crop off the clip's ends"
 
 
 def test_cpu_preset_trains_a_short_clip_whole():

@@ -41,7 +41,7 @@ def train(
     resume: bool = typer.Option(False, "--resume", help="Continue the run in --out from its last (verified) checkpoint."),
     width: Optional[int] = typer.Option(None, "--width", help="Network width (paper: 256)."),
     crop: Optional[int] = typer.Option(None, "--crop", help="Training crop length in frames (cpu preset: 64, and a clip of at most 96 frames trains whole; an explicit --crop applies to every clip)."),
-    crop_edges: Optional[float] = typer.Option(None, "--crop-edges", help="How far, as a share of the crop, crop starts may fall off the clip's ends before being clamped in (cpu preset: 0.25, so the clip's first and last frames are trained on about as often as the middle; 0: uniform starts)."),
+    crop_edges: Optional[float] = typer.Option(None, "--crop-edges", help="How far, as a share of the crop, crop starts may fall off the clip's ends before being clamped in (default 0: uniform starts, which rarely train the clip's first and last second; 0.25 trains them about as often as the middle; measured in BENCHMARKS.md: it helped the idle and cost the crab)."),
     batch: Optional[int] = typer.Option(None, "--batch", help="Batch size (default 64)."),
     checkpoint_every: Optional[int] = typer.Option(None, "--checkpoint-every", help="Iterations between checkpoints."),
     fps: float = typer.Option(30.0, "--fps", help="Feature frame rate."),

@@ -75,7 +75,6 @@ PRESETS = {
         steps=2_800,
         crop=64,
         whole_clip_frames=96,
-        crop_edges=0.25,
         rescale=None,
         lr=2e-4,
         lr_schedule="linear-tail",
