@@ -25,19 +25,12 @@ from sinmdm.eval.motion_features import eval_features, protocol_for  # noqa: E40
 from sinmdm.runtime.bvh import read_bvh  # noqa: E402
 
 
-def covered_windows(reference: np.ndarray, sample: np.ndarray) -> np.ndarray:
-    """(T - window,) bool: which of the reference's windows the sample reproduces."""
-    window, threshold = metrics.COVERAGE_WINDOW, metrics.COVERAGE_THRESHOLD
-    sums = metrics._window_sums(metrics.frame_distances(sample, reference), window)
-    return sums.min(axis=0)[: len(reference) - window] / window < threshold
-
-
 def profile(clip: Path, folder: Path) -> np.ndarray:
     """(windows,) share of the folder's samples covering each window of the clip."""
     reference = read_bvh(clip)
     protocol = protocol_for(reference, eval_preset(reference))
     features = eval_features(reference, protocol)
-    hits = [covered_windows(features, eval_features(read_bvh(p), protocol)) for p in sorted(folder.glob("*.bvh"))]
+    hits = [metrics.covered_windows(features, eval_features(read_bvh(p), protocol)) for p in sorted(folder.glob("*.bvh"))]
     return np.mean(hits, axis=0)
 
 

@@ -116,6 +116,13 @@ def test_global_diversity_long_segments(seed):
     assert metrics.global_diversity(reference, sample) == pytest.approx(brute_global(reference, sample), abs=1e-9)
 
 
+def test_covered_windows_are_the_coverage_window_by_window():
+    reference, sample = random_pair(2)
+    covered = metrics.covered_windows(reference, sample)
+    assert covered.shape == (len(reference) - metrics.COVERAGE_WINDOW,) and covered.dtype == bool
+    assert 100.0 * covered.mean() == pytest.approx(brute_coverage(reference, sample), abs=1e-9)
+
+
 def test_coverage_many_is_mean():
     reference, first = random_pair(0)
     _, second = random_pair(1, reference_frames=45)

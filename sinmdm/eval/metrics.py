@@ -40,6 +40,7 @@ __all__ = [
     "frame_distances",
     "coverage",
     "coverage_many",
+    "covered_windows",
     "global_diversity",
     "local_diversity",
     "inter_diversity",
@@ -118,7 +119,7 @@ def _check_length(name: str, frames: int, needed: int) -> None:
         raise ValueError(f"{name} has {frames} frames, needs at least {needed}")
 
 
-def _coverage_from_distances(distances: FloatArray, window: int, threshold: float) -> float:
+def _covered_from_distances(distances: FloatArray, window: int, threshold: float) -> npt.NDArray[np.bool_]:
     sample_frames, reference_frames = distances.shape
     _check_length("sample", sample_frames, window)
     _check_length("reference", reference_frames, window + 1)
@@ -126,7 +127,11 @@ def _coverage_from_distances(distances: FloatArray, window: int, threshold: floa
     # reference window is never scored, while the best match is taken over
     # every sample window (unmatched starts are +inf in their table).
     best_cost = _window_sums(distances, window).min(axis=0)[: reference_frames - window] / window
-    return 100.0 * float(np.mean(best_cost < threshold))
+    return best_cost < threshold
+
+
+def _coverage_from_distances(distances: FloatArray, window: int, threshold: float) -> float:
+    return 100.0 * float(np.mean(_covered_from_distances(distances, window, threshold)))
 
 
 def _local_from_distances(distances: FloatArray, window: int) -> float:
@@ -169,6 +174,16 @@ def _global_from_distances(distances: FloatArray, min_segment: int) -> float:
         starts = end - lengths[usable]
         best_prefix[end] = np.min(best_prefix[starts] + best_segment[np.flatnonzero(usable), starts])
     return float(best_prefix[sample_frames] / sample_frames)
+
+
+def covered_windows(
+    reference: npt.ArrayLike,
+    sample: npt.ArrayLike,
+    window: int = COVERAGE_WINDOW,
+    threshold: float = COVERAGE_THRESHOLD,
+) -> npt.NDArray[np.bool_]:
+    """(T_in - window,) which reference windows the sample reproduces: `coverage` window by window."""
+    return _covered_from_distances(frame_distances(sample, reference), window, threshold)
 
 
 def coverage(

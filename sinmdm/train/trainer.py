@@ -109,15 +109,15 @@ def choose_root_frame(clip: ClipData, config: TrainConfig, heading: HeadingFrame
     return "world", f"auto: the clip turns {rate:+.1f} deg/s on average, not more than {AUTO_HEADING_DEG_S:g}"
 
 
-def foot_loss_choice(codec, config: TrainConfig) -> str:
-    """Whether the foot-contact loss trains this clip ("on: ..." or "off: ..."), and why. A clip
-    without contact joints or a trajectory joint trains without it, as the paper's loss."""
+def foot_loss_choice(codec, config: TrainConfig) -> tuple[bool, str]:
+    """Whether the foot-contact loss trains this clip, and why. A clip without contact joints or
+    a trajectory joint trains without it, as the paper's loss."""
     if config.foot_loss <= 0:
-        return "off: the paper's loss alone"
+        return False, "off: the paper's loss alone"
     if codec.trajectory_joint is None or not codec.contact_joints:
-        return "off: the clip has no contact joints or no trajectory joint to hold"
+        return False, "off: the clip has no contact joints or no trajectory joint to hold"
     what = "contact joints' velocity matched to the clip's" if config.foot_loss_target == "clip" else "planted joints held still"
-    return f"on: weight {config.foot_loss:g}, the {what}"
+    return True, f"on: weight {config.foot_loss:g}, the {what}"
 
 
 def graph_metadata(clip: ClipData, config: TrainConfig) -> dict:
@@ -174,11 +174,10 @@ class Run:
         self.generator = torch.Generator().manual_seed(seed)
         clip_tensor = torch.from_numpy(np.ascontiguousarray(space.to_graph(clip.features).T, dtype=np.float32))
         self.sampler = BatchSampler(clip_tensor, config, self.generator)
-        self.foot_loss_why = foot_loss_choice(clip.codec, config)
-        foot = None
-        if self.foot_loss_why.startswith("on"):
-            foot = FootContactLoss(clip.codec, space.scale, heading=space.heading is not None)
-        self.extra_loss = None if foot is None else self._foot_term(foot, config)
+        foot_loss_on, self.foot_loss_why = foot_loss_choice(clip.codec, config)
+        self.extra_loss = None
+        if foot_loss_on:
+            self.extra_loss = self._foot_term(FootContactLoss(clip.codec, space.scale, heading=space.heading is not None), config)
         self.step = 0
         self.watch = WatchState()
         self.stopped: str | None = None  # why the watch ended the run early
