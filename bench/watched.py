@@ -100,19 +100,23 @@ def main() -> None:
                     rows.append({"variant": variant, **row})
             checks = [{"step": r["step"], **r["check"]} for r in read_log(run_dir) if "check" in r]
             stage = config.get("stage")
-            if stage:  # the second stage's checks, on the run's step axis
-                checks += [{"step": stage["from_step"] + r["step"], "stage": stage["dir"], **r["check"]}
-                           for r in read_log(run_dir / stage["dir"]) if "check" in r]
+            stages = config.get("stages") or ([stage] if stage else [])
+            for tried in stages:  # the fallback stages' checks, on the run's step axis
+                checks += [{"step": tried["from_step"] + r["step"], "stage": tried["dir"], **r["check"]}
+                           for r in read_log(run_dir / tried["dir"]) if "check" in r]
             check_seconds = sum(c["check_seconds"] for c in checks)
             results.append({
                 "tag": tag, "clip": name, "layout": layout or "as shared", "seed": seed,
-                "train_steps": config["step"] + (stage["steps"] if stage else 0),
+                "train_steps": config["step"] + sum(s["steps"] for s in stages),
                 "kept_step": (stage["from_step"] + json.loads((run_dir / stage["dir"] / "config.json").read_text())
                               ["watch"]["best_step"]) if stage and stage["chosen"]
                 else (config.get("watch") or {}).get("best_step"),
+                "stages": stages,
                 "stage": stage, "sampling_chosen": model.metadata.get("sampling_defaults"),
                 "stopped": (config.get("watch") or {}).get("stopped"),
-                "train_seconds": config["elapsed_seconds"], "train_wall_seconds": round(train_wall, 1),
+                "train_seconds": config["elapsed_seconds"] + sum(
+                    json.loads((run_dir / s["dir"] / "config.json").read_text())["elapsed_seconds"] for s in stages),
+                "train_wall_seconds": round(train_wall, 1),
                 "check_seconds": round(check_seconds, 1), "sampling": config.get("sampling"),
                 "checks": checks, "rows": rows, "date": time.strftime("%Y-%m-%d"),
             })

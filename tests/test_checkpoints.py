@@ -174,6 +174,9 @@ def test_resume_of_a_finished_run(run):
     (lambda c: {**c, "model": {**c["model"], "width": "32"}}, ("invalid model or training settings",)),
     (lambda c: {**c, "stage": {"dir": "../other", "norm": "frame", "steps": 1, "from_step": 1, "chosen": True}},
      ("stage.dir",)),
+    (lambda c: {**c, "stages": [{"dir": "norm-frame/../../x", "norm": "frame", "steps": 1, "from_step": 1,
+                                 "chosen": False}]}, ("stages[0].dir",)),
+    (lambda c: {**c, "stages": ["norm-frame"]}, ("stages[0] is not a record",)),
 ])
 def test_damaged_config_is_one_line_error(run, damage, words):
     (run / CONFIG).write_text(json.dumps(damage(json.loads((run / CONFIG).read_text()))))

@@ -13,7 +13,7 @@ from sinmdm.eval.metrics import harmonic_mean
 from sinmdm.runtime import load_model, read_bvh
 from sinmdm.runtime.model import DEMO_MODEL
 from sinmdm.train.checkpoint import BEST, load_config, read_log
-from sinmdm.train.watch import COPYING, PEAKED, WatchState
+from sinmdm.train.watch import COPYING, PEAKED, STALLED, WatchState
 
 from .conftest import DEMO_CLIP, run_cli
 
@@ -95,6 +95,21 @@ def test_watch_stops_a_copying_run_short_of_the_band():
     assert state.best_step == 600 and state.should_stop(3, scores(99, 1.05)) == COPYING
 
 
+def test_watch_stops_a_run_that_loses_coverage_short_of_the_band():
+    """The Mixamo idle's checks (planted_s9): best at step 400, then coverage and diversity fall
+    together; the crab's (a run still learning, its coverage moving a few points) goes on."""
+    idle = WatchState()
+    for step, (coverage, diversity) in enumerate(((70.6, 1.59), (87.5, 1.49), (84.1, 1.36), (84.8, 1.34),
+                                                   (79.7, 1.31)), start=1):
+        idle.update(step * 200, scores(coverage, diversity))
+    assert idle.best_step == 400 and idle.should_stop(3, scores(79.7, 1.31)) == STALLED
+    crab = WatchState()
+    for step, (coverage, diversity) in enumerate(((62.2, 1.5), (63.9, 1.42), (65.1, 1.38), (61.6, 1.41), (64.3, 1.33),
+                                                   (63.8, 1.31), (63.0, 1.32)), start=1):
+        crab.update(step * 200, scores(coverage, diversity))
+    assert crab.since_best == 4 and crab.should_stop(3, scores(63.0, 1.32)) is None
+
+
 def test_checks_can_score_what_sample_gives_with_the_foot_cleanup():
     """The scorer samples with the cleanup when its settings ask: the demo's feet slide
     25 cm/s without it (BENCHMARKS.md), and far less with it."""
@@ -158,20 +173,64 @@ def test_export_carries_the_choice_and_sample_uses_it(watched_run, tmp_path):
     assert load_model(tmp_path / "last_w48.onnx").metadata["provenance"]["checkpoint"]["checkpoint"] == "last"
 
 
-def test_second_stage_only_for_a_copying_run_with_budget_left():
+def test_fallbacks_only_for_a_copying_run_with_budget_left():
     from types import SimpleNamespace
 
     from sinmdm.train.presets import preset
-    from sinmdm.train.trainer import _second_stage
+    from sinmdm.train.trainer import _fallback_stages, _falls_back, load_clip
 
     config = preset("cpu")
-    copying = SimpleNamespace(config=config, stopped=f"{COPYING}: ...", step=1200)
-    second = _second_stage(copying)
-    assert second.norm == "frame" and second.steps == config.steps - 1200 and second.fallback_norm is None
-    assert _second_stage(SimpleNamespace(config=config, stopped=f"{PEAKED}: ...", step=1200)) is None
-    assert _second_stage(SimpleNamespace(config=config, stopped=None, step=config.steps)) is None
-    assert _second_stage(SimpleNamespace(config=config, stopped=f"{COPYING}: ...", step=config.steps - 100)) is None
-    assert _second_stage(SimpleNamespace(config=second, stopped=f"{COPYING}: ...", step=100)) is None
+    walk = SimpleNamespace(codec=load_clip(DEMO_CLIP, 30.0, {}).codec)
+    copying = SimpleNamespace(config=config, stopped=f"{COPYING}: ...", step=1200, clip=walk)
+    norm, feet = _fallback_stages(copying)
+    assert (norm.norm, norm.foot_loss, norm.fallback_norm, norm.fallback_foot_loss) == ("frame", 0.0, None, 0.0)
+    assert (feet.norm, feet.foot_loss, feet.foot_loss_target, feet.fallback_norm) == ("group", 0.001, "clip", None)
+    assert _falls_back(copying)
+    assert not _falls_back(SimpleNamespace(config=config, stopped=f"{PEAKED}: ...", step=1200, clip=walk))
+    assert not _falls_back(SimpleNamespace(config=config, stopped=None, step=config.steps, clip=walk))
+    assert not _falls_back(SimpleNamespace(config=config, stopped=f"{COPYING}: ...", step=config.steps - 100, clip=walk))
+    assert not _fallback_stages(SimpleNamespace(config=norm, stopped=f"{COPYING}: ...", step=100, clip=walk))
+    asked = SimpleNamespace(config=config.with_overrides(foot_loss=0.0003), stopped=f"{COPYING}: ...", step=100, clip=walk)
+    assert [s.norm for s in _fallback_stages(asked)] == ["frame"]  # a run with its own foot loss keeps it
+    no_feet = SimpleNamespace(codec=SimpleNamespace(trajectory_joint=None, contact_joints=[]))
+    assert [s.norm for s in _fallback_stages(SimpleNamespace(config=config, stopped=f"{COPYING}: ...", clip=no_feet))] == ["frame"]
+    stalled = SimpleNamespace(config=config, stopped=f"{STALLED}: ...", step=1000, clip=walk)
+    (edges,) = _fallback_stages(stalled)
+    assert (edges.norm, edges.crop_edges, edges.foot_loss, edges.foot_loss_target) == ("group", 0.25, 0.0003, "clip")
+    assert _falls_back(stalled)
+    (only_edges,) = _fallback_stages(SimpleNamespace(config=config, stopped=f"{STALLED}: ...", clip=no_feet))
+    assert (only_edges.crop_edges, only_edges.foot_loss) == (0.25, 0.0)
+
+
+@pytest.mark.parametrize("reason, tried", [
+    (COPYING, [("norm-frame", 5, 5), ("norm-group-foot-loss", 10, 5)]),
+    (STALLED, [("norm-group-crop-edges-foot-loss", 5, 5)]),
+])
+def test_a_stopped_run_trains_its_fallback_stages(tmp_path, monkeypatch, reason, tried):
+    """Real training: the watch's verdict is forced to `reason` at every check, so each stage stops
+    at its first check and the next one takes the steps left."""
+    from sinmdm.train.presets import TrainConfig
+    from sinmdm.train.trainer import train
+
+    monkeypatch.setattr(WatchState, "should_stop", lambda self, patience, latest: reason)
+    config = TrainConfig(preset="test", steps=30, batch=4, crop=48, width=32, checkpoint_every=5, check_every=5,
+                         fallback_norm="frame", fallback_foot_loss=0.001, stalled_crop_edges=0.25,
+                         stalled_foot_loss=0.0003, bf16=False)
+    result = train(DEMO_CLIP, tmp_path / "run", config)
+    stages = result["stages"]
+    assert [(s["dir"], s["from_step"], s["steps"]) for s in stages] == tried
+    last = load_config(tmp_path / "run" / tried[-1][0])
+    assert last["foot_loss"]["on"] and last["train"]["foot_loss_target"] == "clip"
+    assert last["train"]["steps"] == config.steps - tried[-1][1] and last["train"]["stalled_crop_edges"] == 0.0
+    balances = [s["best"]["balance"] for s in stages]
+    assert result["stage"]["dir"] == stages[balances.index(max(balances))]["dir"]
+    assert sum(s["chosen"] for s in stages) == int(result["stage"]["chosen"])
+    assert load_config(tmp_path / "run")["stages"] == stages
+    info = run_cli("sinmdm", "info", str(tmp_path / "run"), check=True)
+    shown = info.stdout + info.stderr
+    assert all(f"fallback stage {name}" in shown for name, _, _ in tried)
+    with pytest.raises(Exception, match="is finished"):  # every stage done: nothing left to resume
+        train(DEMO_CLIP, tmp_path / "run", config, resume=True)
 
 
 def test_export_follows_a_chosen_second_stage(watched_run, tiny_run, tmp_path):

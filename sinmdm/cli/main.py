@@ -70,7 +70,7 @@ def train(
 
     from dataclasses import replace
 
-    from ..train.checkpoint import CONFIG
+    from ..train.checkpoint import CONFIG, load_config
     from ..runtime.features import VELOCITY_UNITS
     from ..train.diffusion import LOSS_WEIGHTINGS
     from ..train.foot_loss import FOOT_LOSS_TARGETS
@@ -135,24 +135,26 @@ def train(
                               codec_options=codec_options, on_progress=on_progress, on_check=on_check,
                               compile_mode="auto" if compile is None else ("on" if compile else "off"),
                               foot_loss_asked=bool(foot_loss))
-        progress.update(task, completed=result["step"])
+        stages = _stages(result)
+        done = result["step"] + sum(stage["steps"] for stage in stages)
+        progress.update(task, completed=done)
     finally:
         if progress.live.is_started:
             progress.stop()
+    seconds = result["elapsed_seconds"] + sum(load_config(out / stage["dir"])["elapsed_seconds"] for stage in stages)
     console.print(
-        f"run [bold]{out}[/bold]: step {result['step']}/{result['steps']}, loss {result['loss']}, "
-        f"{result['parameters']:,} parameters, window {result['window']} frames, "
-        f"{result['elapsed_seconds']:.0f} s of training"
+        f"run [bold]{out}[/bold]: step {done}/{result['steps']}" + (f" ({result['step']} in its first stage)" if stages else "")
+        + f", loss {result['loss']}, {result['parameters']:,} parameters, window {result['window']} frames, "
+        f"{seconds:.0f} s of training"
     )
     watch = result.get("watch")
     if watch and watch.get("best"):
         console.print(f"kept step {watch['best_step']} (best balance): {_scores_line(watch['best'])}"
                       + (f"; stopped early: {watch['stopped']}" if watch.get("stopped") else ""))
-    stage = result.get("stage")
-    if stage:
-        console.print(f"second stage ({stage['dir']}, --norm {stage['norm']}, {stage['steps']} steps from step "
+    for stage in _stages(result):
+        console.print(f"fallback stage ({stage['dir']}, {_stage_words(stage)}, {stage['steps']} steps from step "
                       f"{stage['from_step']}): " + (_scores_line(stage["best"]) if stage.get("best") else "no check kept")
-                      + ("  [bold]chosen[/bold]" if stage["chosen"] else "  (the first stage is kept)"))
+                      + ("  [bold]chosen[/bold]" if stage["chosen"] else "  (not kept)"))
     sampling = kept_sampling(out, result)
     if sampling:
         console.print(f"sampling defaults measured on the kept weights: {sampling['steps']} steps, hop {sampling['hop']}"
@@ -213,6 +215,7 @@ def info(
         "watch": config.get("watch"),
         "sampling": kept_sampling(run_dir, config),  # what export writes into the model
         "stage": config.get("stage"),
+        "stages": _stages(config),
     }
     if as_json:
         print_json(summary)
@@ -240,10 +243,10 @@ def info(
         if watch.get("stopped"):
             console.print(f"stopped early: {watch['stopped']}")
         _print_checks(run_dir)
-    if stage:
+    for stage in _stages(config):
         inner = load_config(Path(run_dir) / stage["dir"])
         best = (inner.get("watch") or {}).get("best")
-        console.print(f"second stage {stage['dir']} (--norm {stage['norm']}, steps {stage['from_step']}-"
+        console.print(f"fallback stage {stage['dir']} ({_stage_words(stage)}, steps {stage['from_step']}-"
                       f"{stage['from_step'] + inner['step']}): " + ("[bold]kept[/bold]" if stage["chosen"] else "not kept")
                       + (f", its best at run step {stage['from_step'] + inner['watch']['best_step']}: {_scores_line(best)}"
                          if best else "") + f" (details: sinmdm info {Path(run_dir) / stage['dir']})")
@@ -251,6 +254,16 @@ def info(
     if sampling:
         console.print(f"sampling defaults: {sampling['steps']} steps, hop {sampling['hop']}{_smooth_words(sampling)} "
                       f"(coverage {sampling['scores']['coverage']:.1f} %, global {sampling['scores']['global_diversity']:.2f})")
+
+
+def _stages(config: dict) -> list[dict]:
+    """The fallback stages a run tried (runs before "stages" recorded only the one they tried)."""
+    return config.get("stages") or ([config["stage"]] if config.get("stage") else [])
+
+
+def _stage_words(stage: dict) -> str:
+    return (f"--norm {stage['norm']}" + (f", --crop-edges {stage['crop_edges']:g}" if stage.get("crop_edges") else "")
+            + (f", --foot-loss {stage['foot_loss']:g}" if stage.get("foot_loss") else ""))
 
 
 def _print_checks(run_dir: Path) -> None:

@@ -25,7 +25,7 @@ BEST = "best.pt"  # the best-balanced check's weights, beside checkpoint.pt
 LOG = "log.jsonl"
 CHECKSUMS = "checksums"  # config key: {file name: sha256}
 RUN_FORMAT = 1
-STAGE_PREFIX = "norm-"  # the folder of a run's second stage, inside the run
+STAGE_PREFIX = "norm-"  # the folder of a run's fallback stage, inside the run
 SCORE_KEYS = ("coverage", "global_diversity", "local_diversity", "balance", "jitter_ratio", "check_seconds")
 
 NUMBER = (int, float)
@@ -33,7 +33,7 @@ NUMBER = (int, float)
 REQUIRED = {"clip": dict, "codec": dict, "model": dict, "train": dict, "schedule": dict, "seed": int, "window": int,
             "receptive_field": int, "parameters": int, "step": int, "steps": int, "finished": bool, "device": str,
             "elapsed_seconds": NUMBER}
-OPTIONAL = {"loss": NUMBER, "watch": dict, "sampling": dict, "stage": dict, "start_position": list, "heading_frame": dict, "root_frame": dict,
+OPTIONAL = {"loss": NUMBER, "watch": dict, "sampling": dict, "stage": dict, "stages": list, "start_position": list, "heading_frame": dict, "root_frame": dict,
             CHECKSUMS: dict}
 CLIP = {"name": str, "sha256": str, "frames": int}
 WATCH = {"best_step": int, "checks": int}
@@ -82,18 +82,23 @@ def _check_config(config: dict, path: Path) -> None:
     _check_fields(config, REQUIRED, path, "")
     _check_fields(config, OPTIONAL, path, "", optional=True)
     _check_fields(config["clip"], CLIP, path, "clip.")
-    for key, fields in (("watch", WATCH), ("sampling", SAMPLING), ("stage", STAGE)):
+    stages = [("stage", config.get("stage"))] + [(f"stages[{i}]", s) for i, s in enumerate(config.get("stages") or [])]
+    for key, fields in (("watch", WATCH), ("sampling", SAMPLING)):
         if config.get(key) is not None:
             _check_fields(config[key], fields, path, f"{key}.")
-    for key, scores in (("watch.best", (config.get("watch") or {}).get("best")),
-                        ("stage.best", (config.get("stage") or {}).get("best"))):
+    for key, stage in stages:
+        if stage is None:
+            continue
+        if not isinstance(stage, dict):
+            raise SinMDMError(f"{path}: {key} is not a record")
+        _check_fields(stage, STAGE, path, f"{key}.")
+        if not stage["dir"].startswith(STAGE_PREFIX) or Path(stage["dir"]).name != stage["dir"]:
+            raise SinMDMError(f"{path}: {key}.dir '{stage['dir']}' is not a stage folder of this run")
+    for key, scores in [("watch.best", (config.get("watch") or {}).get("best"))] + [(f"{k}.best", (s or {}).get("best")) for k, s in stages]:
         if scores is not None:
             _check_scores(scores, SCORE_KEYS, path, key)
     if config.get("sampling") is not None:
         _check_scores(config["sampling"]["scores"], SCORE_KEYS[:2], path, "sampling.scores")
-    stage_dir = (config.get("stage") or {}).get("dir", STAGE_PREFIX)
-    if not stage_dir.startswith(STAGE_PREFIX) or Path(stage_dir).name != stage_dir:
-        raise SinMDMError(f"{path}: stage.dir '{stage_dir}' is not a stage folder of this run")
     try:
         ModelConfig.from_dict(config["model"])
         if not isinstance(TrainConfig.from_dict(config["train"]).preset, str):

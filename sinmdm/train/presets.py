@@ -38,6 +38,13 @@ class TrainConfig:
     patience: int = 3
     early_stop: bool = True
     fallback_norm: str | None = None  # a run that stops COPYING spends its remaining steps on this norm
+    # a run whose fallback norm stage stops COPYING too spends what is left on its own norm with the foot-contact
+    # loss ("clip" target) at this weight (trainer._fallback_stages); 0: not tried
+    fallback_foot_loss: float = 0.0
+    # a run that stops STALLED (losing coverage short of the band) spends what is left with crop starts reaching
+    # this far off the clip's ends and the foot-contact loss ("clip") at `stalled_foot_loss` (trainer._fallback_stages)
+    stalled_crop_edges: float = 0.0
+    stalled_foot_loss: float = 0.0
     # checks sample as `sample` will: the foot cleanup on, shaking samples smoothed where calibration would
     # smooth them (eval.balance.ClipScorer.check_as_sampled); False: raw samples, no cleanup
     check_cleanup: bool = False
@@ -82,6 +89,9 @@ PRESETS = {
         bf16=True,
         check_every=200,
         fallback_norm="frame",
+        fallback_foot_loss=0.001,
+        stalled_crop_edges=0.25,
+        stalled_foot_loss=0.0003,
         root_frame="auto",
         check_cleanup=True,
     ),

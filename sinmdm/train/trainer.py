@@ -31,7 +31,7 @@ from .diffusion import GaussianDiffusion, loss_weighting
 from .foot_loss import FootContactLoss
 from .model import Denoiser, ModelConfig, count_parameters, receptive_field
 from .presets import TrainConfig
-from .watch import COPYING, PEAKED, QualityWatch, WatchState, sampling_defaults
+from .watch import COPYING, PEAKED, STALLED, QualityWatch, WatchState, sampling_defaults
 
 
 def resolve_device(name: str = "auto") -> torch.device:
@@ -340,7 +340,7 @@ def _trim_log(run_dir: Path, step: int) -> None:
 
 def _refuse_finished(run_dir: Path, previous: dict, run: Run) -> None:
     """A resumed run must have steps left: a finished run continues only when --steps raises its total."""
-    if run.stopped and (_second_stage(run) is None or "stage" in previous):
+    if run.stopped and (not _falls_back(run) or "stage" in previous):
         raise SinMDMError(f"{run_dir} is finished: the quality watch stopped it at step {run.step} "
                           f"({run.stopped.split(':')[0]}); train a new run to change its budget")
     if not run.stopped and run.step >= run.config.steps:
@@ -447,33 +447,59 @@ def train(
     if run.step == started_step:
         checkpoint()  # nothing to train (already at --steps): refresh the config's progress
     result = run.config_dict(finished=run.finished)
-    second = _second_stage(run)
-    if second is None:
+    stages = _train_fallbacks(run, clip_path, run_dir, seed, device, codec_options, on_progress, on_check, compile_mode)
+    if not stages:
         return result
-    stage_dir = run_dir / f"{STAGE_PREFIX}{second.norm}"
-    offset = run.step
-
-    def stage_progress(step: int, total: int, loss: float, rate: float) -> None:
-        if on_progress:
-            on_progress(offset + step, config.steps, loss, rate)
-
-    def stage_check(step: int, scores: dict, best_step: int) -> None:
-        if on_check:
-            on_check(offset + step, scores, offset + best_step)
-
-    stage_done = (stage_dir / CONFIG).exists() and load_config(stage_dir)["finished"]
-    stage = load_config(stage_dir) if stage_done else train(
-        clip_path, stage_dir, second, seed=seed, device=device, resume=(stage_dir / CONFIG).exists(),
-        codec_options=codec_options, on_progress=stage_progress, on_check=stage_check, compile_mode=compile_mode)
-    first_best, stage_best = (run.watch.best or {}).get("balance", -1.0), (stage["watch"]["best"] or {}).get("balance", -1.0)
-    result["stage"] = {"dir": stage_dir.name, "norm": second.norm, "steps": stage["step"], "from_step": offset,
-                       "best": stage["watch"]["best"], "chosen": stage_best > first_best}
+    first_best = (run.watch.best or {}).get("balance", -1.0)
+    best_stage = max(stages, key=lambda s: (s["best"] or {}).get("balance", -1.0))
+    chosen = (best_stage["best"] or {}).get("balance", -1.0) > first_best
+    result["stages"] = [{**s, "chosen": chosen and s is best_stage} for s in stages]
+    result["stage"] = {**best_stage, "chosen": chosen}
     write_text_atomic(run_dir / CONFIG, json.dumps(result, indent=2) + "\n")
     return result
 
 
+def _train_fallbacks(run: Run, clip_path: Path, run_dir: Path, seed: int, device: str, codec_options: dict,
+                     on_progress, on_check, compile_mode: str) -> list[dict]:
+    """Train the run's fallback stages in turn (`_fallback_stages`), each on the budget the ones
+    before left, while the last stopped for the same reason the first did; their records (the
+    best check of each)."""
+    config, records, offset, stopped = run.config, [], run.step, run.stopped
+    reason = (stopped or "").split(":")[0]
+    for stage_config in _fallback_stages(run):
+        remaining = config.steps - offset
+        if (stopped or "").split(":")[0] != reason or remaining < 2 * (config.check_every or 1):
+            break
+        stage_config = replace(stage_config, steps=remaining)
+        stage_dir = run_dir / stage_dir_name(stage_config)
+        start = offset
+
+        def stage_progress(step: int, total: int, loss: float, rate: float, start: int = start) -> None:
+            if on_progress:
+                on_progress(start + step, config.steps, loss, rate)
+
+        def stage_check(step: int, scores: dict, best_step: int, start: int = start) -> None:
+            if on_check:
+                on_check(start + step, scores, start + best_step)
+
+        done = (stage_dir / CONFIG).exists() and load_config(stage_dir)["finished"]
+        stage = load_config(stage_dir) if done else train(
+            clip_path, stage_dir, stage_config, seed=seed, device=device, resume=(stage_dir / CONFIG).exists(),
+            codec_options=codec_options, on_progress=stage_progress, on_check=stage_check, compile_mode=compile_mode)
+        records.append({"dir": stage_dir.name, "norm": stage_config.norm, "foot_loss": stage_config.foot_loss,
+                        "crop_edges": stage_config.crop_edges, "steps": stage["step"], "from_step": start,
+                        "best": stage["watch"]["best"]})
+        offset, stopped = start + stage["step"], stage["watch"].get("stopped")
+    return records
+
+
+def stage_dir_name(stage: TrainConfig) -> str:
+    return (f"{STAGE_PREFIX}{stage.norm}" + ("-crop-edges" if stage.crop_edges > 0 else "")
+            + ("-foot-loss" if stage.foot_loss > 0 else ""))
+
+
 def kept_stage(run_dir: Path, config: dict) -> dict | None:
-    """The config of the run's second stage when the watch kept it over the first, else None."""
+    """The config of the run's fallback stage when the watch kept it over the first, else None."""
     stage = config.get("stage")
     return load_config(Path(run_dir) / stage["dir"]) if stage and stage.get("chosen") else None
 
@@ -484,17 +510,43 @@ def kept_sampling(run_dir: Path, config: dict) -> dict | None:
     return (kept if kept is not None else config).get("sampling")
 
 
-def _second_stage(run: Run) -> TrainConfig | None:
-    """A copying run short of the band spends the rest of its budget on the other
-    normalisation (`fallback_norm`, a strictly local model that copies less:
-    BENCHMARKS.md); None when there is nothing to try."""
+def _falls_back(run: Run) -> bool:
+    """Whether the run, as it stopped, goes on to a fallback stage."""
+    left = run.config.steps - run.step
+    return bool(run.stopped) and left >= 2 * (run.config.check_every or 1) and bool(_fallback_stages(run))
+
+
+def _fallback_stages(run: Run) -> list[TrainConfig]:
+    """What a run that stopped short of the band tries next, in order, each trained from scratch
+    on the steps left (budgets are set by `_train_fallbacks`). A run that stopped COPYING: the other
+    normalisation (`fallback_norm`, a strictly local model that copies less), then its own norm with
+    the foot-contact loss matched to the clip's feet (`fallback_foot_loss`), which learns poses more
+    slowly: whole-clip Xia normal copied under both norms and reached the band with it. A run that
+    stopped STALLED: crop starts reaching the clip's ends (`stalled_crop_edges`: the idle's lost
+    coverage sat at its ends) with the foot-contact loss at `stalled_foot_loss` (the idle: 95.2 %,
+    18 of 20 samples plausible; BENCHMARKS.md). The foot loss only where the clip has contact joints
+    and the run trained without it."""
     config = run.config
-    if not (run.stopped or "").startswith(COPYING) or not config.fallback_norm or config.fallback_norm == config.norm:
-        return None
-    remaining = config.steps - run.step
-    if remaining < 2 * (config.check_every or 1):
-        return None
-    return replace(config, norm=config.fallback_norm, steps=remaining, fallback_norm=None)
+    plain = replace(config, fallback_norm=None, fallback_foot_loss=0.0, stalled_crop_edges=0.0, stalled_foot_loss=0.0)
+
+    def with_feet(stage: TrainConfig, weight: float) -> TrainConfig:
+        feet = replace(stage, foot_loss=weight, foot_loss_target="clip")
+        takes = weight > 0 and config.foot_loss <= 0 and foot_loss_choice(run.clip.codec, feet)[0]
+        return feet if takes else stage
+
+    reason = (run.stopped or "").split(":")[0]
+    stages = []
+    if reason == COPYING:
+        if config.fallback_norm and config.fallback_norm != config.norm:
+            stages.append(replace(plain, norm=config.fallback_norm))
+        feet = with_feet(plain, config.fallback_foot_loss)
+        if feet is not plain:
+            stages.append(feet)
+    elif reason == STALLED and (config.stalled_crop_edges > 0 or config.stalled_foot_loss > 0):
+        stage = with_feet(replace(plain, crop_edges=max(config.crop_edges, config.stalled_crop_edges)), config.stalled_foot_loss)
+        if stage != plain:
+            stages.append(stage)
+    return stages
 
 
 def _quality_watch(run: Run) -> QualityWatch:
@@ -516,6 +568,9 @@ def _check(run: Run, watch: QualityWatch, log, on_check) -> dict | None:
     reason = run.watch.should_stop(run.config.patience, scores) if run.config.early_stop else None
     if reason == PEAKED:
         run.stopped = f"{PEAKED}: the balance peaked in the band at step {run.watch.best_step}"
+    elif reason == STALLED:
+        run.stopped = (f"{STALLED}: coverage fell to {scores['coverage']:.0f} % from {run.watch.best['coverage']:.0f} % "
+                       f"at step {run.watch.best_step}, short of the band")
     elif reason == COPYING:
         run.stopped = (f"{COPYING}: coverage {scores['coverage']:.0f} % while global diversity fell to "
                        f"{scores['global_diversity']:.2f} (best balance at step {run.watch.best_step})")

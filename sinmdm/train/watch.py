@@ -4,7 +4,9 @@ Every `check_every` steps the EMA weights sample a few motions with a fast sampl
 (the runtime's own loop, the denoiser called in torch), which are scored against the
 clip with the paper's metrics and the plausibility metrics. The checkpoint with the
 best *balance* is kept as `best.pt`; once the balance has not improved for `patience`
-checks after reaching the band, training stops.
+checks, training stops when the best is in the band (peaked), when the model covers the clip
+but copies it (copying) or when it is losing coverage short of the band (stalled); the trainer
+then spends what is left on a fallback stage (trainer._fallback_stages).
 
 Balance (`sinmdm.eval.balance`) = min(coverage / 95, global diversity / 1.3, 3 / jitter
 ratio, and the turning and pace terms): a copying model and a drifting one both lose to the
@@ -28,7 +30,12 @@ from ..eval.balance import COVERAGE_BAND, CheckSettings, ClipScorer, choose_samp
 from ..runtime.bvh import BVH
 from ..runtime.model import MotionModel
 
-PEAKED, COPYING = "peaked", "copying"  # why a watched run stopped early
+PEAKED, COPYING, STALLED = "peaked", "copying", "stalled"  # why a watched run stopped early
+# Coverage points a run short of the band may lose from its best check before it is STALLED. The checks'
+# 6 samples move coverage by up to 3.5 points between neighbouring checks of a run that is still learning
+# (the crab's); the Mixamo idle lost 7-8 points from its best (step 400) by step 1,000-1,200 while its
+# diversity fell too, and never came back in 2,800 steps (BENCHMARKS.md).
+STALL_DROP = 5.0
 
 
 class TorchWindowDenoiser:
@@ -110,14 +117,18 @@ class WatchState:
         """Why training should end now (None: go on). After `patience` checks without
         improvement: PEAKED when the best is in the band; COPYING when the model already
         covers the clip (coverage in band) but its diversity keeps falling below the band:
-        more steps only copy more (a walk under GroupNorm, BENCHMARKS.md). A model still
-        short of the clip's coverage trains on."""
+        more steps only copy more (a walk under GroupNorm, BENCHMARKS.md); STALLED when a
+        model short of the band has lost coverage since its best (STALL_DROP): it narrows onto
+        parts of the clip instead of learning the rest. A model still short of the clip's
+        coverage and not losing it trains on."""
         if self.best is None or self.since_best < patience:
             return None
         if in_band(self.best):
             return PEAKED
         if latest["coverage"] >= COVERAGE_BAND:
             return COPYING
+        if latest["coverage"] <= self.best["coverage"] - STALL_DROP:
+            return STALLED
         return None
 
     def to_dict(self) -> dict:
