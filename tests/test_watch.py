@@ -249,7 +249,9 @@ def test_export_follows_a_chosen_second_stage(watched_run, tiny_run, tmp_path):
     run_cli("sinmdm", "export", str(tiny_run), "--out", str(tmp_path / "t.onnx"), check=True)
     staged, tiny = load_model(tmp_path / "s_w48.onnx"), load_model(tmp_path / "t_w48.onnx")
     assert staged.metadata["model_id"] == tiny.metadata["model_id"]
-    assert staged.metadata["provenance"]["checkpoint"]["stage"] == "norm-frame"
+    provenance = staged.metadata["provenance"]
+    assert provenance["checkpoint"]["stage"] == "norm-frame" and provenance["checkpoint"]["run_step"] == 10 + 10
+    assert provenance["train"] == load_config(tiny_run)["train"] and provenance["steps"] == 10 + 10
 
 
 def test_damaged_best_checkpoint_is_refused_by_export(watched_run, tmp_path):

@@ -607,9 +607,12 @@ def load_trained_model(run_dir: Path, use_ema: bool = True, checkpoint: str = "b
     stage = config.get("stage")
     if checkpoint == "best" and stage and stage.get("chosen"):
         model, inner = load_trained_model(Path(run_dir) / stage["dir"], use_ema, checkpoint)
-        return model, {**config, "model": inner["model"], "window": inner["window"],
+        # what trained the kept weights is the stage's: its settings, its loss and where it ended on the run's steps
+        return model, {**config, "model": inner["model"], "window": inner["window"], "train": inner["train"],
+                       "step": stage["from_step"] + inner["step"], "loss": inner.get("loss"),
                        "receptive_field": inner["receptive_field"], "sampling": inner.get("sampling"),
-                       "chosen": {**inner["chosen"], "stage": stage["dir"]}}
+                       "chosen": {**inner["chosen"], "stage": stage["dir"],
+                                  "run_step": stage["from_step"] + inner["chosen"]["step"]}}
     model = Denoiser(ModelConfig.from_dict(config["model"]))
     if checkpoint == "best" and (Path(run_dir) / BEST).exists():
         best = load_best(run_dir)
