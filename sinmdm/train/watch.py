@@ -33,7 +33,7 @@ from ..runtime.model import MotionModel
 PEAKED, COPYING, STALLED = "peaked", "copying", "stalled"  # why a watched run stopped early
 # Coverage points a run short of the band may lose from its best check before it is STALLED. The checks'
 # 6 samples move coverage by up to 3.5 points between neighbouring checks of a run that is still learning
-# (the crab's); the Mixamo idle lost 7-8 points from its best (step 400) by step 1,000-1,200 while its
+# (the crab's); the Mixamo idle lost 5-8 points from its best (step 400) by step 1,000-1,200 while its
 # diversity fell too, and never came back in 2,800 steps (BENCHMARKS.md).
 STALL_DROP = 5.0
 
