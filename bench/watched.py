@@ -57,6 +57,7 @@ def main() -> None:
 
     from sinmdm.runtime import load_model
     from sinmdm.train.checkpoint import read_log
+    from sinmdm.train.trainer import trained_seconds, tried_stages
 
     results = json.loads(args.results.read_text()) if args.results.exists() else []
     args.results.parent.mkdir(parents=True, exist_ok=True)
@@ -100,7 +101,7 @@ def main() -> None:
                     rows.append({"variant": variant, **row})
             checks = [{"step": r["step"], **r["check"]} for r in read_log(run_dir) if "check" in r]
             stage = config.get("stage")
-            stages = config.get("stages") or ([stage] if stage else [])
+            stages = tried_stages(config)
             for tried in stages:  # the fallback stages' checks, on the run's step axis
                 checks += [{"step": tried["from_step"] + r["step"], "stage": tried["dir"], **r["check"]}
                            for r in read_log(run_dir / tried["dir"]) if "check" in r]
@@ -114,8 +115,7 @@ def main() -> None:
                 "stages": stages,
                 "stage": stage, "sampling_chosen": model.metadata.get("sampling_defaults"),
                 "stopped": (config.get("watch") or {}).get("stopped"),
-                "train_seconds": config["elapsed_seconds"] + sum(
-                    json.loads((run_dir / s["dir"] / "config.json").read_text())["elapsed_seconds"] for s in stages),
+                "train_seconds": trained_seconds(run_dir, config),
                 "train_wall_seconds": round(train_wall, 1),
                 "check_seconds": round(check_seconds, 1), "sampling": config.get("sampling"),
                 "checks": checks, "rows": rows, "date": time.strftime("%Y-%m-%d"),

@@ -70,13 +70,13 @@ def train(
 
     from dataclasses import replace
 
-    from ..train.checkpoint import CONFIG, load_config
+    from ..train.checkpoint import CONFIG
     from ..runtime.features import VELOCITY_UNITS
     from ..train.diffusion import LOSS_WEIGHTINGS
     from ..train.foot_loss import FOOT_LOSS_TARGETS
     from ..train.model import NORM_KINDS
     from ..train.presets import preset as get_preset
-    from ..train.trainer import ROOT_FRAME_CHOICES, kept_sampling, resumed_budget, train as run_training
+    from ..train.trainer import ROOT_FRAME_CHOICES, kept_sampling, resumed_budget, train as run_training, trained_seconds, tried_stages
 
     if norm is not None and norm not in NORM_KINDS:
         raise SinMDMError(f"--norm must be {' or '.join(NORM_KINDS)}, got '{norm}'")
@@ -135,13 +135,13 @@ def train(
                               codec_options=codec_options, on_progress=on_progress, on_check=on_check,
                               compile_mode="auto" if compile is None else ("on" if compile else "off"),
                               foot_loss_asked=bool(foot_loss))
-        stages = _stages(result)
+        stages = tried_stages(result)
         done = result["step"] + sum(stage["steps"] for stage in stages)
         progress.update(task, completed=done)
     finally:
         if progress.live.is_started:
             progress.stop()
-    seconds = result["elapsed_seconds"] + sum(load_config(out / stage["dir"])["elapsed_seconds"] for stage in stages)
+    seconds = trained_seconds(out, result)
     console.print(
         f"run [bold]{out}[/bold]: step {done}/{result['steps']}" + (f" ({result['step']} in its first stage)" if stages else "")
         + f", loss {result['loss']}, {result['parameters']:,} parameters, window {result['window']} frames, "
@@ -151,7 +151,7 @@ def train(
     if watch and watch.get("best"):
         console.print(f"kept step {watch['best_step']} (best balance): {_scores_line(watch['best'])}"
                       + (f"; stopped early: {watch['stopped']}" if watch.get("stopped") else ""))
-    for stage in _stages(result):
+    for stage in stages:
         console.print(f"fallback stage ({stage['dir']}, {_stage_words(stage)}, {stage['steps']} steps from step "
                       f"{stage['from_step']}): " + (_scores_line(stage["best"]) if stage.get("best") else "no check kept")
                       + ("  [bold]chosen[/bold]" if stage["chosen"] else "  (not kept)"))
@@ -190,7 +190,7 @@ def info(
 ) -> None:
     """Show a run's configuration, parameter count and progress."""
     from ..train.checkpoint import load_config
-    from ..train.trainer import kept_sampling
+    from ..train.trainer import kept_sampling, tried_stages
 
     config = load_config(run_dir)
     summary = {
@@ -215,7 +215,7 @@ def info(
         "watch": config.get("watch"),
         "sampling": kept_sampling(run_dir, config),  # what export writes into the model
         "stage": config.get("stage"),
-        "stages": _stages(config),
+        "stages": tried_stages(config),
     }
     if as_json:
         print_json(summary)
@@ -243,7 +243,7 @@ def info(
         if watch.get("stopped"):
             console.print(f"stopped early: {watch['stopped']}")
         _print_checks(run_dir)
-    for stage in _stages(config):
+    for stage in tried_stages(config):
         inner = load_config(Path(run_dir) / stage["dir"])
         best = (inner.get("watch") or {}).get("best")
         console.print(f"fallback stage {stage['dir']} ({_stage_words(stage)}, steps {stage['from_step']}-"
@@ -254,11 +254,6 @@ def info(
     if sampling:
         console.print(f"sampling defaults: {sampling['steps']} steps, hop {sampling['hop']}{_smooth_words(sampling)} "
                       f"(coverage {sampling['scores']['coverage']:.1f} %, global {sampling['scores']['global_diversity']:.2f})")
-
-
-def _stages(config: dict) -> list[dict]:
-    """The fallback stages a run tried (runs before "stages" recorded only the one they tried)."""
-    return config.get("stages") or ([config["stage"]] if config.get("stage") else [])
 
 
 def _stage_words(stage: dict) -> str:

@@ -31,7 +31,7 @@ from .diffusion import GaussianDiffusion, loss_weighting
 from .foot_loss import FootContactLoss
 from .model import Denoiser, ModelConfig, count_parameters, receptive_field
 from .presets import TrainConfig
-from .watch import COPYING, PEAKED, STALLED, QualityWatch, WatchState, sampling_defaults
+from .watch import COPYING, PEAKED, STALLED, QualityWatch, WatchState, sampling_defaults, stop_reason
 
 
 def resolve_device(name: str = "auto") -> torch.device:
@@ -342,7 +342,7 @@ def _refuse_finished(run_dir: Path, previous: dict, run: Run) -> None:
     """A resumed run must have steps left: a finished run continues only when --steps raises its total."""
     if run.stopped and (not _falls_back(run) or "stage" in previous):
         raise SinMDMError(f"{run_dir} is finished: the quality watch stopped it at step {run.step} "
-                          f"({run.stopped.split(':')[0]}); train a new run to change its budget")
+                          f"({stop_reason(run.stopped)}); train a new run to change its budget")
     if not run.stopped and run.step >= run.config.steps:
         where = "is finished" if previous["finished"] else f"is past --steps {run.config.steps}"
         raise SinMDMError(f"{run_dir} {where} at step {run.step}: pass --steps above {run.step} to train further")
@@ -459,18 +459,21 @@ def train(
     return result
 
 
+def _room_for_a_stage(config: TrainConfig, used: int) -> bool:
+    """Whether the steps left of the budget can hold a stage (two checks at least)."""
+    return config.steps - used >= 2 * (config.check_every or 1)
+
+
 def _train_fallbacks(run: Run, clip_path: Path, run_dir: Path, seed: int, device: str, codec_options: dict,
                      on_progress, on_check, compile_mode: str) -> list[dict]:
     """Train the run's fallback stages in turn (`_fallback_stages`), each on the budget the ones
     before left, while the last stopped for the same reason the first did; their records (the
     best check of each)."""
     config, records, offset, stopped = run.config, [], run.step, run.stopped
-    reason = (stopped or "").split(":")[0]
     for stage_config in _fallback_stages(run):
-        remaining = config.steps - offset
-        if (stopped or "").split(":")[0] != reason or remaining < 2 * (config.check_every or 1):
+        if stop_reason(stopped) != stop_reason(run.stopped) or not _room_for_a_stage(config, offset):
             break
-        stage_config = replace(stage_config, steps=remaining)
+        stage_config = replace(stage_config, steps=config.steps - offset)
         stage_dir = run_dir / stage_dir_name(stage_config)
         start = offset
 
@@ -498,6 +501,17 @@ def stage_dir_name(stage: TrainConfig) -> str:
             + ("-foot-loss" if stage.foot_loss > 0 else ""))
 
 
+def tried_stages(config: dict) -> list[dict]:
+    """The fallback stages a run tried (runs before "stages" recorded only the one they tried)."""
+    return config.get("stages") or ([config["stage"]] if config.get("stage") else [])
+
+
+def trained_seconds(run_dir: Path, config: dict) -> float:
+    """Seconds of training of the run and every fallback stage it tried."""
+    return config["elapsed_seconds"] + sum(load_config(Path(run_dir) / stage["dir"])["elapsed_seconds"]
+                                           for stage in tried_stages(config))
+
+
 def kept_stage(run_dir: Path, config: dict) -> dict | None:
     """The config of the run's fallback stage when the watch kept it over the first, else None."""
     stage = config.get("stage")
@@ -512,8 +526,7 @@ def kept_sampling(run_dir: Path, config: dict) -> dict | None:
 
 def _falls_back(run: Run) -> bool:
     """Whether the run, as it stopped, goes on to a fallback stage."""
-    left = run.config.steps - run.step
-    return bool(run.stopped) and left >= 2 * (run.config.check_every or 1) and bool(_fallback_stages(run))
+    return bool(run.stopped) and _room_for_a_stage(run.config, run.step) and bool(_fallback_stages(run))
 
 
 def _fallback_stages(run: Run) -> list[TrainConfig]:
@@ -534,7 +547,7 @@ def _fallback_stages(run: Run) -> list[TrainConfig]:
         takes = weight > 0 and config.foot_loss <= 0 and foot_loss_choice(run.clip.codec, feet)[0]
         return feet if takes else stage
 
-    reason = (run.stopped or "").split(":")[0]
+    reason = stop_reason(run.stopped)
     stages = []
     if reason == COPYING:
         if config.fallback_norm and config.fallback_norm != config.norm:
@@ -542,7 +555,7 @@ def _fallback_stages(run: Run) -> list[TrainConfig]:
         feet = with_feet(plain, config.fallback_foot_loss)
         if feet is not plain:
             stages.append(feet)
-    elif reason == STALLED and (config.stalled_crop_edges > 0 or config.stalled_foot_loss > 0):
+    elif reason == STALLED:
         stage = with_feet(replace(plain, crop_edges=max(config.crop_edges, config.stalled_crop_edges)), config.stalled_foot_loss)
         if stage != plain:
             stages.append(stage)

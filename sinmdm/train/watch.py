@@ -38,6 +38,11 @@ PEAKED, COPYING, STALLED = "peaked", "copying", "stalled"  # why a watched run s
 STALL_DROP = 5.0
 
 
+def stop_reason(stopped: str | None) -> str:
+    """PEAKED, COPYING or STALLED from a run's "stopped" text ("" while it trains on)."""
+    return (stopped or "").split(":")[0]
+
+
 class TorchWindowDenoiser:
     """The runtime's denoiser interface (x_t (N, F, W), t (N,) -> x0 numpy) on torch weights."""
 
