@@ -334,6 +334,24 @@ def crab_sampling_table(name: str = "crab_sampling_grid_2026-12-07") -> str:
     return "\n".join(lines) + "\n"
 
 
+def coverage_margin_table(name: str = "coverage_margin-2026-12-07") -> str:
+    """bench/coverage_margin.py: the paper's coverage taken apart, one row per folder of samples."""
+    entries = results(name)
+    if not entries:
+        return "(no coverage margin results yet)\n"
+    lines = header("clip: samples", "coverage %", "rotations only", "at 1.125x / 1.25x the threshold",
+                   "labels' share of the matched cost", "moving where the clip is still / still where it moves",
+                   "labels still, samples (clip)")
+    for e in entries:
+        c, k = e["coverage"], e.get("contacts")
+        labels = (f"| {fmt(k['share_of_matched_cost'])} | {fmt(100 * k['moving_where_clip_still'], 1)} % / "
+                  f"{fmt(100 * k['still_where_clip_moving'], 1)} % | {fmt(100 * k['sample_still_share'], 0)} % "
+                  f"({fmt(100 * k['clip_still_share'], 0)} %)") if k else "| - | - | -"
+        lines.append(f"| {Path(e['clip']).stem}: {e['samples']} | {fmt(c['paper'], 1)} | {fmt(c['rotations only'], 1)} "
+                     f"| {fmt(c['threshold x1.125'], 1)} / {fmt(c['threshold x1.25'], 1)} {labels} |")
+    return "\n".join(lines) + "\n"
+
+
 def in_order_table(name: str = "in_order_2026-12-07") -> str:
     """bench/in_order.py: coverage of samples made of exact copies of the clip in stretches of L
     frames, per clip, and the in-order run length of real samples."""
@@ -458,7 +476,7 @@ TABLES = {"WATCHED_TABLE": watched_table, "WATCHED_1206_TABLE": lambda: watched_
           "WATCHED_COMPILED_TABLE": lambda: watched_table("watched_compiled_2026-12-06", jitter=True),
           "ROOT_FRAME_TABLE": root_frame_table, "TURNING_TABLE": turning_table,
           "AS_SAMPLED_TABLE": as_sampled_table, "AS_SAMPLED_CURVE_TABLE": lambda: watched_curve_table("watched_default_2026-12-07", jitter=True),
-          "IN_ORDER_TABLE": in_order_table, "RECIPE_ARMS_TABLE": recipe_arms_table,
+          "IN_ORDER_TABLE": in_order_table, "COVERAGE_MARGIN_TABLE": coverage_margin_table, "RECIPE_ARMS_TABLE": recipe_arms_table,
           "CRAB_LONG_CURVE_TABLE": lambda: watched_curve_table("recipe_crab_long_2026-12-07", jitter=True), "CRAB_SAMPLING_TABLE": crab_sampling_table,
           "WATCHED_COMPILED_4000_TABLE": lambda: watched_table("watched_compiled_4000_2026-12-06", jitter=True), "WATCHED_CURVE_TABLE": watched_curve_table, "LAYOUTS_TABLE": layouts_table,
           "LAYOUTS_1205_TABLE": lambda: layouts_table("layouts_2026-12-05"),
