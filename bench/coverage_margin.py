@@ -34,11 +34,10 @@ LOOSER = (1.125, 1.25, 1.5)
 
 def best_matches(reference: np.ndarray, sample: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Per scored reference window: the start of its best sample window and that match's mean cost."""
-    distances = metrics.frame_distances(sample, reference)
-    starts_s, starts_r = len(sample) - WINDOW + 1, len(reference) - WINDOW
-    sums = sum(distances[m : m + starts_s, m : m + starts_r] for m in range(WINDOW))
+    # The paper scores reference starts 0 .. T - 31 (metrics._covered_from_distances).
+    sums = metrics._window_sums(metrics.frame_distances(sample, reference), WINDOW)[:, : len(reference) - WINDOW]
     best = sums.argmin(axis=0)
-    return best, sums[best, np.arange(starts_r)] / WINDOW
+    return best, sums[best, np.arange(sums.shape[1])] / WINDOW
 
 
 def margin(clip: Path, folder: Path) -> dict:

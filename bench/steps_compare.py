@@ -22,6 +22,7 @@ def main() -> None:
     parser.add_argument("--samples", type=int, default=3)
     parser.add_argument("--hop", type=int, default=None, help="window hop (default: half a window)")
     parser.add_argument("--sampler", default="ddpm", choices=["ddpm", "ddim"])
+    parser.add_argument("--no-cleanup", action="store_true", help="sample without the foot cleanup")
     parser.add_argument("--results", type=Path, default=Path(__file__).resolve().parent / "results" / "steps_compare.json")
     args = parser.parse_args()
     config = json.loads((args.run / "config.json").read_text())
@@ -29,9 +30,11 @@ def main() -> None:
     preset = eval_protocol(args.clip)
     rows = []
     for steps in args.steps:
-        out = args.run / f"compare_{args.sampler}_{steps}_hop{args.hop or config['window'] // 2}"
+        out = args.run / (f"compare_{args.sampler}_{steps}_hop{args.hop or config['window'] // 2}"
+                          + ("_nocleanup" if args.no_cleanup else ""))
+        options = {"cleanup": False} if args.no_cleanup else {}
         rows.append(sample_and_score(model, MOTIONS / args.clip, out, steps, args.samples, preset,
-                                     hop=args.hop, sampler=args.sampler))
+                                     hop=args.hop, sampler=args.sampler, **options))
         print(json.dumps(rows[-1]), flush=True)
     previous = json.loads(args.results.read_text()) if args.results.exists() else []
     previous.append({"clip": args.clip, "run": args.run.name, "rows": rows, "date": time.strftime("%Y-%m-%d")})
