@@ -197,18 +197,16 @@ def test_fallbacks_only_for_a_copying_run_with_budget_left():
     stalled = SimpleNamespace(config=config, stopped=f"{STALLED}: ...", step=1000, clip=walk)
     (edges,) = _fallback_stages(stalled)
     assert (edges.norm, edges.crop_edges, edges.foot_loss, edges.foot_loss_target) == ("group", 0.25, 0.0003, "clip")
-    assert edges.warm_start and not edges.stalled_warm_start
     assert _falls_back(stalled)
     (only_edges,) = _fallback_stages(SimpleNamespace(config=config, stopped=f"{STALLED}: ...", clip=no_feet))
     assert (only_edges.crop_edges, only_edges.foot_loss) == (0.25, 0.0)
 
 
-@pytest.mark.parametrize("reason, warm, tried", [
-    (COPYING, True, [("norm-frame", 5, 5), ("norm-group-foot-loss", 10, 5)]),  # a copying run never warm-starts
-    (STALLED, False, [("norm-group-crop-edges-foot-loss", 5, 5)]),
-    (STALLED, True, [("norm-group-crop-edges-foot-loss-warm", 5, 5)]),
+@pytest.mark.parametrize("reason, tried", [
+    (COPYING, [("norm-frame", 5, 5), ("norm-group-foot-loss", 10, 5)]),
+    (STALLED, [("norm-group-crop-edges-foot-loss", 5, 5)]),
 ])
-def test_a_stopped_run_trains_its_fallback_stages(tmp_path, monkeypatch, reason, warm, tried):
+def test_a_stopped_run_trains_its_fallback_stages(tmp_path, monkeypatch, reason, tried):
     """Real training: the watch's verdict is forced to `reason` at every check, so each stage stops
     at its first check and the next one takes the steps left."""
     from sinmdm.train.presets import TrainConfig
@@ -217,11 +215,10 @@ def test_a_stopped_run_trains_its_fallback_stages(tmp_path, monkeypatch, reason,
     monkeypatch.setattr(WatchState, "should_stop", lambda self, patience, latest: reason)
     config = TrainConfig(preset="test", steps=30, batch=4, crop=48, width=32, checkpoint_every=5, check_every=5,
                          fallback_norm="frame", fallback_foot_loss=0.001, stalled_crop_edges=0.25,
-                         stalled_foot_loss=0.0003, stalled_warm_start=warm, bf16=False)
+                         stalled_foot_loss=0.0003, bf16=False)
     result = train(DEMO_CLIP, tmp_path / "run", config)
     stages = result["stages"]
     assert [(s["dir"], s["from_step"], s["steps"]) for s in stages] == tried
-    assert [s["warm_start"] for s in stages] == [name.endswith("-warm") for name, _, _ in tried]
     last = load_config(tmp_path / "run" / tried[-1][0])
     assert last["foot_loss"]["on"] and last["train"]["foot_loss_target"] == "clip"
     assert last["train"]["steps"] == config.steps - tried[-1][1] and last["train"]["stalled_crop_edges"] == 0.0
@@ -234,26 +231,6 @@ def test_a_stopped_run_trains_its_fallback_stages(tmp_path, monkeypatch, reason,
     assert all(f"fallback stage {name}" in shown for name, _, _ in tried)
     with pytest.raises(Exception, match="is finished"):  # every stage done: nothing left to resume
         train(DEMO_CLIP, tmp_path / "run", config, resume=True)
-
-
-def test_a_warm_started_run_begins_from_the_weights_given(tiny_run, tmp_path):
-    """`start_weights` (a stalled run's warm-started stage): the model and its average start from
-    them; with a zero learning rate one step leaves them exactly as given."""
-    import torch
-
-    from sinmdm.runtime.errors import SinMDMError
-    from sinmdm.train.checkpoint import load_state
-    from sinmdm.train.presets import TrainConfig
-    from sinmdm.train.trainer import train
-
-    given = load_best(tiny_run)["weights"] if (tiny_run / BEST).exists() else load_state(tiny_run)["model"]
-    config = TrainConfig.from_dict({**load_config(tiny_run)["train"], "steps": 1, "lr": 0.0})
-    train(DEMO_CLIP, tmp_path / "warm", config, start_weights=given)
-    state = load_state(tmp_path / "warm")
-    for module in ("model", "ema") if "ema" in state else ("model",):
-        assert all(torch.equal(state[module][k], given[k]) for k in given)
-    with pytest.raises(SinMDMError, match="do not fit"):
-        train(DEMO_CLIP, tmp_path / "wide", config.with_overrides(width=64), start_weights=given)
 
 
 def test_export_follows_a_chosen_second_stage(watched_run, tiny_run, tmp_path):

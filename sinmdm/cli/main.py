@@ -258,8 +258,7 @@ def info(
 
 def _stage_words(stage: dict) -> str:
     return (f"--norm {stage['norm']}" + (f", --crop-edges {stage['crop_edges']:g}" if stage.get("crop_edges") else "")
-            + (f", --foot-loss {stage['foot_loss']:g}" if stage.get("foot_loss") else "")
-            + (f", from the weights kept at step {stage['from_weights_step']}" if stage.get("warm_start") else ""))
+            + (f", --foot-loss {stage['foot_loss']:g}" if stage.get("foot_loss") else ""))
 
 
 def _print_checks(run_dir: Path) -> None:

@@ -45,10 +45,6 @@ class TrainConfig:
     # this far off the clip's ends and the foot-contact loss ("clip") at `stalled_foot_loss` (trainer._fallback_stages)
     stalled_crop_edges: float = 0.0
     stalled_foot_loss: float = 0.0
-    # that stage starts from the weights the watch kept of the first (its peak) instead of from scratch
-    stalled_warm_start: bool = False
-    # a stage that starts from its run's kept weights (set by trainer._fallback_stages, never by a preset)
-    warm_start: bool = False
     # checks sample as `sample` will: the foot cleanup on, shaking samples smoothed where calibration would
     # smooth them (eval.balance.ClipScorer.check_as_sampled); False: raw samples, no cleanup
     check_cleanup: bool = False
@@ -96,7 +92,6 @@ PRESETS = {
         fallback_foot_loss=0.001,
         stalled_crop_edges=0.25,
         stalled_foot_loss=0.0003,
-        stalled_warm_start=True,
         root_frame="auto",
         check_cleanup=True,
     ),

@@ -238,13 +238,6 @@ class Run:
         self.stopped = state.get("stopped")
         self.sampling = state.get("sampling")
 
-    def start_from(self, weights: dict) -> None:
-        for module in [self.model] + ([self.ema] if self.ema is not None else []):
-            try:
-                module.load_state_dict(weights)
-            except RuntimeError as exc:
-                raise SinMDMError(f"the starting weights do not fit this run's model ({str(exc)[:120]})") from None
-
     def nonfinite_weight(self) -> str | None:
         modules = [self.model] + ([self.ema] if self.ema is not None else [])
         return next(filter(None, (nonfinite_tensor(m.state_dict()) for m in modules)), None)
@@ -374,12 +367,10 @@ def train(
     on_check: Callable[[int, dict, int], None] | None = None,
     compile_mode: str = "auto",
     foot_loss_asked: bool = False,
-    start_weights: dict | None = None,
 ) -> dict:
     """Train (or resume) a run; returns the final run config. `compile_mode`: auto, on or
     off (compiled.py). `foot_loss_asked`: the foot-contact loss was asked for by name, so a
-    clip it cannot train is refused instead of trained without it. `start_weights`: a new
-    run's model and average start from these (a warm-started fallback stage)."""
+    clip it cannot train is refused instead of trained without it."""
     run_dir = Path(run_dir)
     codec_options = codec_options or {}
     if compile_mode not in COMPILE_CHOICES:
@@ -404,8 +395,6 @@ def train(
         if not run.stopped:
             run.sampling = None  # measured again at the new end
         _trim_log(run_dir, run.step)
-    elif start_weights is not None:
-        run.start_from(start_weights)
     check_writable_dir(run_dir)
 
     def checkpoint(best: dict | None = None) -> None:
@@ -484,8 +473,7 @@ def _train_fallbacks(run: Run, clip_path: Path, run_dir: Path, seed: int, device
     for stage_config in _fallback_stages(run):
         if stop_reason(stopped) != stop_reason(run.stopped) or not _room_for_a_stage(config, offset):
             break
-        warm = stage_config.warm_start and (run_dir / BEST).exists()
-        stage_config = replace(stage_config, steps=config.steps - offset, warm_start=warm)
+        stage_config = replace(stage_config, steps=config.steps - offset)
         stage_dir = run_dir / stage_dir_name(stage_config)
         start = offset
 
@@ -499,20 +487,18 @@ def _train_fallbacks(run: Run, clip_path: Path, run_dir: Path, seed: int, device
 
         done = (stage_dir / CONFIG).exists() and load_config(stage_dir)["finished"]
         stage = load_config(stage_dir) if done else train(
-            clip_path, stage_dir, stage_config, seed=seed, device=device,
-            resume=(stage_dir / CONFIG).exists(), codec_options=codec_options, on_progress=stage_progress,
-            on_check=stage_check, compile_mode=compile_mode, start_weights=load_best(run_dir)["weights"] if warm else None)
+            clip_path, stage_dir, stage_config, seed=seed, device=device, resume=(stage_dir / CONFIG).exists(),
+            codec_options=codec_options, on_progress=stage_progress, on_check=stage_check, compile_mode=compile_mode)
         records.append({"dir": stage_dir.name, "norm": stage_config.norm, "foot_loss": stage_config.foot_loss,
-                        "crop_edges": stage_config.crop_edges, "warm_start": warm,
-                        **({"from_weights_step": run.watch.best_step} if warm else {}), "steps": stage["step"],
-                        "from_step": start, "best": stage["watch"]["best"]})
+                        "crop_edges": stage_config.crop_edges, "steps": stage["step"], "from_step": start,
+                        "best": stage["watch"]["best"]})
         offset, stopped = start + stage["step"], stage["watch"].get("stopped")
     return records
 
 
 def stage_dir_name(stage: TrainConfig) -> str:
     return (f"{STAGE_PREFIX}{stage.norm}" + ("-crop-edges" if stage.crop_edges > 0 else "")
-            + ("-foot-loss" if stage.foot_loss > 0 else "") + ("-warm" if stage.warm_start else ""))
+            + ("-foot-loss" if stage.foot_loss > 0 else ""))
 
 
 def tried_stages(config: dict) -> list[dict]:
@@ -554,8 +540,7 @@ def _fallback_stages(run: Run) -> list[TrainConfig]:
     18 of 20 samples plausible; BENCHMARKS.md). The foot loss only where the clip has contact joints
     and the run trained without it."""
     config = run.config
-    plain = replace(config, fallback_norm=None, fallback_foot_loss=0.0, stalled_crop_edges=0.0, stalled_foot_loss=0.0,
-                    stalled_warm_start=False)
+    plain = replace(config, fallback_norm=None, fallback_foot_loss=0.0, stalled_crop_edges=0.0, stalled_foot_loss=0.0)
 
     def with_feet(stage: TrainConfig, weight: float) -> TrainConfig:
         feet = replace(stage, foot_loss=weight, foot_loss_target="clip")
@@ -573,7 +558,6 @@ def _fallback_stages(run: Run) -> list[TrainConfig]:
     elif reason == STALLED:
         stage = with_feet(replace(plain, crop_edges=max(config.crop_edges, config.stalled_crop_edges)), config.stalled_foot_loss)
         if stage != plain:
-            stage = replace(stage, warm_start=config.stalled_warm_start)
             stages.append(stage)
     return stages
 
