@@ -51,8 +51,9 @@ def main() -> None:
     parser.add_argument("--clip", required=True)
     parser.add_argument("--tag", required=True)
     parser.add_argument("--set", dest="overrides", action="append", default=[])
+    parser.add_argument("--seed", type=int, default=0, help="training seed")
     parser.add_argument("--samples", type=int, default=20)
-    parser.add_argument("--steps", type=int, default=50, help="sampling steps")
+    parser.add_argument("--steps", type=int, default=50, help="sampling steps (0: the steps the run calibrated)")
     parser.add_argument("--faithful", action="store_true",
                         help="also score the paper's sampler (no margin, no cleanup): foot skating before cleanup")
     parser.add_argument("--run", type=Path, default=None,
@@ -64,7 +65,7 @@ def main() -> None:
     overrides = dict(parse_override(TrainConfig, text) for text in args.overrides)
     config = TrainConfig.from_dict({**preset("cpu").to_dict(), **overrides})  # keeps explicit Nones
     results = json.loads(args.results.read_text()) if args.results.exists() else []
-    tag = f"{Path(args.clip).stem}-{args.tag}"
+    tag = f"{Path(args.clip).stem}-{args.tag}" + (f"@{args.seed}" if args.seed else "")
     if any(r["tag"] == tag for r in results):
         print(f"skip {tag}: already measured")
         return
@@ -72,10 +73,14 @@ def main() -> None:
     clip = MOTIONS / args.clip
     began = time.perf_counter()
     if args.run is None:
-        train(clip, run_dir, config, device="cpu", resume=(run_dir / "config.json").exists())
+        train(clip, run_dir, config, seed=args.seed, device="cpu", resume=(run_dir / "config.json").exists())
     train_wall = time.perf_counter() - began
     run_config = load_config(run_dir)
     model = export_trained_window(run_dir, run_config["window"])
+    if args.steps == 0:
+        from sinmdm.runtime import load_model
+
+        args.steps = load_model(model).default_steps
     row = sample_and_score(model, clip, run_dir / f"samples_{args.steps}", args.steps, args.samples,
                            eval_protocol(args.clip))
     rows = [row]
@@ -86,7 +91,7 @@ def main() -> None:
     # read again: other ablations may have finished (and appended) while this one trained
     results = json.loads(args.results.read_text()) if args.results.exists() else []
     results.append({
-        "tag": tag, "clip": args.clip, "variant": args.tag, "overrides": args.overrides,
+        "tag": tag, "clip": args.clip, "variant": args.tag, "overrides": args.overrides, "seed": args.seed,
         "train_steps": run_config["step"], "train_seconds": run_config["elapsed_seconds"],
         "train_wall_seconds": round(train_wall, 1) if args.run is None else None, "window": run_config["window"],
         "threads": int(os.environ.get("OMP_NUM_THREADS", "0")),
