@@ -44,6 +44,7 @@ def parse_override(config_type, text: str) -> tuple[str, object]:
 
 
 def main() -> None:
+    from sinmdm.runtime import load_model
     from sinmdm.train.presets import TrainConfig, preset
     from sinmdm.train.trainer import load_config, train
 
@@ -77,15 +78,11 @@ def main() -> None:
     train_wall = time.perf_counter() - began
     run_config = load_config(run_dir)
     model = export_trained_window(run_dir, run_config["window"])
-    if args.steps == 0:
-        from sinmdm.runtime import load_model
-
-        args.steps = load_model(model).default_steps
-    row = sample_and_score(model, clip, run_dir / f"samples_{args.steps}", args.steps, args.samples,
-                           eval_protocol(args.clip))
+    steps = args.steps or load_model(model).default_steps
+    row = sample_and_score(model, clip, run_dir / f"samples_{steps}", steps, args.samples, eval_protocol(args.clip))
     rows = [row]
     if args.faithful:
-        rows.append(sample_and_score(model, clip, run_dir / f"samples_{args.steps}_faithful", args.steps,
+        rows.append(sample_and_score(model, clip, run_dir / f"samples_{steps}_faithful", steps,
                                      args.samples, eval_protocol(args.clip), margin=0, cleanup=False, smooth=0.0))
     print(json.dumps(rows))
     # read again: other ablations may have finished (and appended) while this one trained

@@ -20,7 +20,8 @@ def main() -> None:
     parser.add_argument("--clip", required=True)
     parser.add_argument("--steps", nargs="+", type=int, default=[1000, 50, 20])
     parser.add_argument("--samples", type=int, default=3)
-    parser.add_argument("--hop", type=int, default=None, help="window hop (default: half a window)")
+    parser.add_argument("--hop", type=int, default=None,
+                        help="window hop (default: the one the model measured, else half a window)")
     parser.add_argument("--sampler", default="ddpm", choices=["ddpm", "ddim"])
     parser.add_argument("--no-cleanup", action="store_true", help="sample without the foot cleanup")
     parser.add_argument("--results", type=Path, default=Path(__file__).resolve().parent / "results" / "steps_compare.json")
@@ -30,7 +31,7 @@ def main() -> None:
     preset = eval_protocol(args.clip)
     rows = []
     for steps in args.steps:
-        out = args.run / (f"compare_{args.sampler}_{steps}_hop{args.hop or config['window'] // 2}"
+        out = args.run / (f"compare_{args.sampler}_{steps}_hop{args.hop or 'model'}"
                           + ("_nocleanup" if args.no_cleanup else ""))
         options = {"cleanup": False} if args.no_cleanup else {}
         rows.append(sample_and_score(model, MOTIONS / args.clip, out, steps, args.samples, preset,
