@@ -4,6 +4,7 @@ sample 20 motions of twice the clip's length and score them, like bench/quality.
     python bench/recipe_ablation.py --clip Joe_Walk-In-Circle.bvh --tag rescale \
         --set rescale=0.75,1.25 --work runs/recipe --results bench/results/recipe.json
 
+`--layout static-root-z-up` trains a layout derived from the clip (bench/layouts.py).
 `--set KEY=VALUE` overrides any TrainConfig field (steps, crop, rescale, lr, lr_schedule,
 ema, norm, dropout, width, batch, ...). Finished tags are skipped; an interrupted
 training resumes. `--run DIR` scores a finished run (the baseline) the same way, without
@@ -21,7 +22,8 @@ from dataclasses import fields
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from quality import MOTIONS, ROOT, eval_protocol, export_trained_window, sample_and_score  # noqa: E402
+from layouts import derived_clip  # noqa: E402
+from quality import ROOT, eval_protocol, export_trained_window, sample_and_score  # noqa: E402
 
 
 def parse_override(config_type, text: str) -> tuple[str, object]:
@@ -51,6 +53,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--clip", required=True)
     parser.add_argument("--tag", required=True)
+    parser.add_argument("--layout", default=None, help="a derived layout of the clip (bench/layouts.py)")
     parser.add_argument("--set", dest="overrides", action="append", default=[])
     parser.add_argument("--seed", type=int, default=0, help="training seed")
     parser.add_argument("--samples", type=int, default=20)
@@ -66,12 +69,12 @@ def main() -> None:
     overrides = dict(parse_override(TrainConfig, text) for text in args.overrides)
     config = TrainConfig.from_dict({**preset("cpu").to_dict(), **overrides})  # keeps explicit Nones
     results = json.loads(args.results.read_text()) if args.results.exists() else []
-    tag = f"{Path(args.clip).stem}-{args.tag}" + (f"@{args.seed}" if args.seed else "")
+    tag = f"{Path(args.clip).stem}{'-' + args.layout if args.layout else ''}-{args.tag}" + (f"@{args.seed}" if args.seed else "")
     if any(r["tag"] == tag for r in results):
         print(f"skip {tag}: already measured")
         return
     run_dir = args.run or args.work / tag
-    clip = MOTIONS / args.clip
+    clip = derived_clip(args.clip, args.layout, args.work)
     began = time.perf_counter()
     if args.run is None:
         train(clip, run_dir, config, seed=args.seed, device="cpu", resume=(run_dir / "config.json").exists())
@@ -79,16 +82,16 @@ def main() -> None:
     run_config = load_config(run_dir)
     model = export_trained_window(run_dir, run_config["window"])
     steps = args.steps or load_model(model).default_steps
-    row = sample_and_score(model, clip, run_dir / f"samples_{steps}", steps, args.samples, eval_protocol(args.clip))
+    row = sample_and_score(model, clip, run_dir / f"samples_{steps}", steps, args.samples, eval_protocol(clip))
     rows = [row]
     if args.faithful:
         rows.append(sample_and_score(model, clip, run_dir / f"samples_{steps}_faithful", steps,
-                                     args.samples, eval_protocol(args.clip), margin=0, cleanup=False, smooth=0.0))
+                                     args.samples, eval_protocol(clip), margin=0, cleanup=False, smooth=0.0))
     print(json.dumps(rows))
     # read again: other ablations may have finished (and appended) while this one trained
     results = json.loads(args.results.read_text()) if args.results.exists() else []
     results.append({
-        "tag": tag, "clip": args.clip, "variant": args.tag, "overrides": args.overrides, "seed": args.seed,
+        "tag": tag, "clip": args.clip, "layout": args.layout or "as shared", "variant": args.tag, "overrides": args.overrides, "seed": args.seed,
         "train_steps": run_config["step"], "train_seconds": run_config["elapsed_seconds"],
         "train_wall_seconds": round(train_wall, 1) if args.run is None else None, "window": run_config["window"],
         "threads": int(os.environ.get("OMP_NUM_THREADS", "0")),

@@ -37,6 +37,7 @@ def test_a_clip_against_itself_is_neutral(walk):
     assert row["foot_skating_cm_s"] == row["clip_foot_skating_cm_s"]
     assert row["foot_bob_cm_s"] == row["clip_foot_bob_cm_s"]
     assert row["turning_distance_deg_s"] == 0 and row["turning_deg_s"] == row["clip_turning_deg_s"]
+    assert row["foot_lift_cm"] == row["clip_foot_lift_cm"] > 5 and row["lift_judged"]
 
 
 def test_a_teleport_is_named_with_its_frame(walk):
@@ -100,6 +101,29 @@ def test_feet_that_never_stop_are_named(walk):
     assert row["verdict"].startswith("feet glide"), row["verdict"]
     itself = plausibility(walk, [walk])["samples"][0]
     assert itself["planted_share"] == itself["clip_planted_share"] and itself["verdict"] == "plausible"
+
+
+def test_feet_that_shuffle_are_named(walk):
+    """The legs' rotations pulled most of the way to their mean pose: the feet still step and plant,
+    the body travels as in the clip, but they lift about half as high (what the Z-up walk's kept
+    checkpoint did, BENCHMARKS.md "Feet that shuffle")."""
+    names, channels = walk.skeleton.names, walk.skeleton.channels
+    start = np.cumsum([0, *(len(c) for c in channels)])
+    legs = [j for j, n in enumerate(names) if any(k in n for k in ("UpLeg", "Leg", "Foot", "Toe"))]
+    def damp(values):
+        for j in legs:
+            part = values[:, start[j]:start[j + 1]]
+            values[:, start[j]:start[j + 1]] = part.mean(axis=0) + 0.4 * (part - part.mean(axis=0))
+        values[:, 1] += 3.0  # the damped legs reach 2 cm lower on average: the hips up by 3 (cm)
+    row = plausibility(walk, [_edited(walk, damp)])["samples"][0]
+    assert row["foot_lift_cm"] < 0.7 * row["clip_foot_lift_cm"]
+    assert row["verdict"].startswith("feet shuffle"), row["verdict"]
+
+
+def test_feet_that_barely_lift_in_the_clip_are_not_judged():
+    elephant = read_bvh(real_clip("Elephant_idle1.bvh"))
+    row = plausibility(elephant, [elephant])["samples"][0]
+    assert not row["lift_judged"] and row["verdict"] == "plausible"
 
 
 def test_eval_reports_plausibility(tmp_path, walk):

@@ -73,6 +73,7 @@ PLAUSIBILITY = (
     ("turning_distance_deg_s", "turning distance (deg/s)", None),
     ("fastest_turn_deg_s", "fastest turn (deg/s, worst sample)", "clip_fastest_turn_deg_s"),
     ("planted_share", "frames with feet planted", "clip_planted_share"),
+    ("foot_lift_cm", "how high the feet lift (cm)", "clip_foot_lift_cm"),
     ("foot_skating_cm_s", "foot skating (cm/s)", "clip_foot_skating_cm_s"),
     ("foot_bob_cm_s", "planted feet bobbing (cm/s)", "clip_foot_bob_cm_s"),
     ("penetration_cm", "floor penetration (cm)", None),

@@ -266,7 +266,7 @@ def _print_checks(run_dir: Path) -> None:
 
     checks = check_records(run_dir)
     table = Table(title="quality checks (EMA weights)")
-    for column in ("step", "coverage %", "global", "local", "balance", "jitter", "turning off", "pace off", "planted", "s"):
+    for column in ("step", "coverage %", "global", "local", "balance", "jitter", "turning off", "pace off", "planted", "lift", "s"):
         table.add_column(column, justify="right")
     for record in checks:
         c = record["check"]
@@ -279,6 +279,7 @@ def _print_checks(run_dir: Path) -> None:
                       f"{c['jitter_ratio']:.1f}" + (" s" if c.get("smooth") else ""), off["turning_distance_deg_s"],
                       off["pace_distance_m_s"],
                       f"{c['planted_share']:.0%} / {c['planted_needed']:.0%}" if "planted_needed" in c else "-",
+                      f"{c['foot_lift_ratio']:.2f}x" if "foot_lift_ratio" in c else "-",
                       f"{c['check_seconds']:.1f}")
     console.print(table)
 

@@ -4,7 +4,7 @@ rotations and contact bits, not root motion). Per sample, against the clip, at
 facing direction, pace (how far the character travels in a second, against the clip), turning
 and spinning (how fast the character's heading changes, over a second and at its fastest,
 against the clip's), foot skating and bobbing (horizontal and vertical speed of planted feet),
-floor penetration and jitter, and a one-line verdict (bobbing is reported, not
+how high the feet lift (a model that shuffles), floor penetration and jitter, and a one-line verdict (bobbing is reported, not
 judged: the cleanup holds ankles, not toes, at their height).
 
 Joints are the REFERENCE codec's (trajectory joint, contacts, up axis), found by
@@ -36,6 +36,13 @@ SKATING_RATIO, SKATING_SLACK_CM_S = 1.5, 2.0
 # more on 90 % of frames (its clip's: 0.005), coverage 100 %, global diversity 1.57 (BENCHMARKS.md).
 PLANTED_RATIO = 0.5
 PENETRATION_CM = 2.0
+# Feet that shuffle: the contact joints lift (their 95th height percentile above their 5th) less than
+# this share of the clip's. The Z-up walk's kept step-400 checkpoint (100 % / 1.40 at its check)
+# lifted its toes 8 cm where the clip lifts them 17, the same run's weights 600 steps later 15;
+# nothing else here saw it (BENCHMARKS.md, "Feet that shuffle"). Judged only where the clip's feet
+# lift at least LIFT_FLOOR of the character's size: an idle's few millimetres are no gait.
+LIFT_RATIO = 0.7
+LIFT_FLOOR = 0.03
 JITTER_RATIO = 2.0
 # Turning: the distance between the sample's and the clip's distributions of heading change
 # per second (over 1 s windows, signed: a clip that only turns left allows no right turns).
@@ -180,6 +187,20 @@ def planted_speeds_cm_s(t: Track, contacts: list[int], still: np.ndarray, up: in
     return float(horizontal[still].mean() * 100), float(np.abs(velocity[..., up])[still].mean() * 100)
 
 
+def foot_lift(t: Track, contacts: list[int], up: int) -> float:
+    """How high the contact joints lift, in metres: the mean over them of their 95th height
+    percentile above their 5th (each joint's own, so a foot resting a little high still counts)."""
+    if not contacts:
+        return 0.0
+    heights = t.positions[:, contacts, up]
+    return float((np.percentile(heights, 95, axis=0) - np.percentile(heights, 5, axis=0)).mean())
+
+
+def lift_judged(clip_lift_m: float, size: float) -> bool:
+    """Whether the clip's feet lift enough for a sample's lift to be judged against them."""
+    return clip_lift_m >= LIFT_FLOOR * size
+
+
 def share(mask: np.ndarray) -> float:
     """The share of True in `mask` (0 when it is empty: a clip without contacts)."""
     return float(mask.mean()) if mask.size else 0.0
@@ -225,6 +246,7 @@ class Reference:
     skating_cm_s: float
     bob_cm_s: float
     planted_share: float
+    lift_m: float  # foot_lift of the clip
     backward_share: float
     backward_half_max: float
     heading_axis: np.ndarray
@@ -248,7 +270,7 @@ def reference_figures(ref: Track, codec: MotionCodec, contacts: list[int]) -> Re
     return Reference(codec=codec, contacts=contacts, floor=floor, joint_floors=joint_floors(ref, floor, up),
                      forward=forward, steps=root_steps(ref), speeds=_speeds(ref, up), paces=pace,
                      pace_halves_m_s=wasserstein_1d(pace[:len(pace) // 2], pace[len(pace) // 2:]), skating_cm_s=skating, bob_cm_s=bob,
-                     planted_share=share(still),
+                     planted_share=share(still), lift_m=foot_lift(ref, contacts, up),
                      backward_share=backward_share(ref, forward, up),
                      backward_half_max=most_backward_half(ref, forward, up), heading_axis=axis, turning=turning,
                      turning_halves_deg_s=wasserstein_1d(turning[:half], turning[half:]),
@@ -295,6 +317,9 @@ def score_sample(ref: Reference, sample: Track) -> dict:
         "clip_foot_bob_cm_s": ref.bob_cm_s,
         "planted_share": share(still),
         "clip_planted_share": ref.planted_share,
+        "foot_lift_cm": foot_lift(sample, ref.contacts, up) * 100,
+        "clip_foot_lift_cm": ref.lift_m * 100,
+        "lift_judged": lift_judged(ref.lift_m, size),
         "penetration_cm": float(depth[below].mean() * 100) if below.any() else 0.0,
         "penetration_share": float(below.any(axis=1).mean()),
         "jitter_ratio": _ratio(jerk(sample), ref.jerk),
@@ -345,6 +370,8 @@ def verdict(s: dict) -> str:
     if s.get("planted_share", 1.0) < PLANTED_RATIO * s.get("clip_planted_share", 0.0):
         return (f"feet glide: planted on {_percent(s['planted_share'])} of frames "
                 f"(clip: {_percent(s['clip_planted_share'])})")
+    if s.get("lift_judged") and s["foot_lift_cm"] < LIFT_RATIO * s["clip_foot_lift_cm"]:
+        return f"feet shuffle: they lift {s['foot_lift_cm']:.0f} cm (clip: {s['clip_foot_lift_cm']:.0f})"
     if s["foot_skating_cm_s"] > SKATING_RATIO * s["clip_foot_skating_cm_s"] + SKATING_SLACK_CM_S:
         return f"feet slide {s['foot_skating_cm_s']:.1f} cm/s while planted (clip: {s['clip_foot_skating_cm_s']:.1f})"
     if s["jitter_ratio"] > JITTER_RATIO:
@@ -370,7 +397,7 @@ def plausibility(reference: BVH, samples: list[BVH], units: str | float = "auto"
             "root_step_p99_ratio", "speed_distance_m_s", "pace_m_s", "pace_distance_m_s", "backward_share",
             "turning_distance_deg_s",
             "turning_deg_s", "foot_skating_cm_s",
-            "foot_bob_cm_s", "planted_share", "penetration_cm", "penetration_share", "jitter_ratio")},
+            "foot_bob_cm_s", "planted_share", "foot_lift_cm", "penetration_cm", "penetration_share", "jitter_ratio")},
         "clip_backward_share": rows[0]["clip_backward_share"],
         "clip_backward_half_max": rows[0]["clip_backward_half_max"],
         "clip_pace_m_s": rows[0]["clip_pace_m_s"],
@@ -381,6 +408,8 @@ def plausibility(reference: BVH, samples: list[BVH], units: str | float = "auto"
         "clip_foot_skating_cm_s": rows[0]["clip_foot_skating_cm_s"],
         "clip_foot_bob_cm_s": rows[0]["clip_foot_bob_cm_s"],
         "clip_planted_share": rows[0]["clip_planted_share"],
+        "clip_foot_lift_cm": rows[0]["clip_foot_lift_cm"],
+        "lift_judged": rows[0]["lift_judged"],
         "implausible": sum(r["verdict"] != "plausible" for r in rows),
     } if rows else None
     return {"samples": rows, "aggregate": aggregate,
