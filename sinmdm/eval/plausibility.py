@@ -37,9 +37,9 @@ SKATING_RATIO, SKATING_SLACK_CM_S = 1.5, 2.0
 PLANTED_RATIO = 0.5
 PENETRATION_CM = 2.0
 # Feet that shuffle: the contact joints lift (their 95th height percentile above their 5th) less than
-# this share of the clip's. The Z-up walk's kept step-400 checkpoint (100 % / 1.40 at its check)
-# lifted its toes 8 cm where the clip lifts them 17, the same run's weights 600 steps later 15;
-# nothing else here saw it (BENCHMARKS.md, "Feet that shuffle"). Judged only where the clip's feet
+# this share of the clip's. The Z-up walk's kept step-400 checkpoint (at lr 1e-4, 100 % / 1.40 at its
+# check) lifted its feet 4.0 cm as sampled where the clip lifts them 10.9; the same run's weights 600
+# steps later, 8.6 cm; nothing else here saw it (BENCHMARKS.md, "Feet that shuffle"). Judged only where the clip's feet
 # lift at least LIFT_FLOOR of the character's size: an idle's few millimetres are no gait.
 LIFT_RATIO = 0.7
 LIFT_FLOOR = 0.03
