@@ -33,12 +33,12 @@ def main() -> None:
     codec = build_codec(clip, fps=30.0)
     names = [clip.skeleton.names[j] for j in codec.contact_joints]
     labels = args.labels.split(",") if args.labels else [str(f) for f in args.folders]
-    strips = [("clip", stick_figure(clip), None)]
+    strips = [("clip", stick_figure(clip))]
     for folder, label in zip(args.folders, labels):
         files = sorted(folder.glob("*.bvh"))
         aggregate = plausibility(clip, [read_bvh(f) for f in files])["aggregate"]
         ratio = aggregate["foot_lift_cm"] / aggregate["clip_foot_lift_cm"]
-        strips.append((f"{label}: lift {ratio:.2f}x the clip's over {len(files)} samples", stick_figure(read_bvh(files[0])), ratio))
+        strips.append((f"{label}: lift {ratio:.2f}x the clip's over {len(files)} samples", stick_figure(read_bvh(files[0]))))
         print(f"{label}: feet lift {aggregate['foot_lift_cm']:.1f} cm, the clip's {aggregate['clip_foot_lift_cm']:.1f} "
               f"({ratio:.2f}x), {aggregate['implausible']} of {len(files)} implausible")
     width, height = 1200, 150
@@ -46,12 +46,11 @@ def main() -> None:
     draw = ImageDraw.Draw(image)
     def heights(figure):
         index = [figure.names.index(n) for n in names if n in figure.names]
-        frames = min(figure.frames, int(args.seconds * figure.fps))
-        return figure.points[:frames, index, 1]
-    top = max(float(np.percentile(heights(f), 99.5)) for _, f, _ in strips) * 1.1
-    bottom = min(float(heights(f).min()) for _, f, _ in strips)
+        return figure.points[:int(args.seconds * figure.fps), index, 1]
+    top = max(float(np.percentile(heights(f), 99.5)) for _, f in strips) * 1.1
+    bottom = min(float(heights(f).min()) for _, f in strips)
     colours = [(200, 40, 40), (40, 40, 200), (40, 150, 40), (160, 100, 0)]
-    for row, (label, figure, _) in enumerate(strips):
+    for row, (label, figure) in enumerate(strips):
         y0 = row * height
         values = heights(figure)
         frames = int(args.seconds * figure.fps)

@@ -23,6 +23,13 @@ def walk():
     return read_bvh(real_clip("Joe_Walk-In-Circle.bvh"))
 
 
+def _leg_columns(clip: BVH) -> list[slice]:
+    """The motion columns of each leg joint (hips to toes) of a Mixamo clip."""
+    start = np.cumsum([0, *(len(c) for c in clip.skeleton.channels)])
+    return [slice(start[j], start[j + 1]) for j, n in enumerate(clip.skeleton.names)
+            if any(k in n for k in ("UpLeg", "Leg", "Foot", "Toe"))]
+
+
 def _edited(clip: BVH, edit) -> BVH:
     values = clip.values.copy()
     edit(values)
@@ -90,12 +97,9 @@ def test_a_dip_on_a_few_frames_is_named_with_a_share_above_zero(walk):
 def test_feet_that_never_stop_are_named(walk):
     """The legs held in one pose while the body travels as in the clip: the feet glide along with
     it, never planted, yet there is nothing to skate on planted frames, no pace or turning change."""
-    names, channels = walk.skeleton.names, walk.skeleton.channels
-    start = np.cumsum([0, *(len(c) for c in channels)])
-    legs = [j for j, n in enumerate(names) if any(k in n for k in ("UpLeg", "Leg", "Foot", "Toe"))]
     def freeze(values):
-        for j in legs:
-            values[:, start[j]:start[j + 1]] = values[0, start[j]:start[j + 1]]
+        for columns in _leg_columns(walk):
+            values[:, columns] = values[0, columns]
     row = plausibility(walk, [_edited(walk, freeze)])["samples"][0]
     assert row["planted_share"] < 0.5 * row["clip_planted_share"]
     assert row["verdict"].startswith("feet glide"), row["verdict"]
@@ -107,13 +111,10 @@ def test_feet_that_shuffle_are_named(walk):
     """The legs' rotations pulled most of the way to their mean pose: the feet still step and plant,
     the body travels as in the clip, but they lift about half as high (what the Z-up walk's kept
     checkpoint did, BENCHMARKS.md "Feet that shuffle")."""
-    names, channels = walk.skeleton.names, walk.skeleton.channels
-    start = np.cumsum([0, *(len(c) for c in channels)])
-    legs = [j for j, n in enumerate(names) if any(k in n for k in ("UpLeg", "Leg", "Foot", "Toe"))]
     def damp(values):
-        for j in legs:
-            part = values[:, start[j]:start[j + 1]]
-            values[:, start[j]:start[j + 1]] = part.mean(axis=0) + 0.4 * (part - part.mean(axis=0))
+        for columns in _leg_columns(walk):
+            part = values[:, columns]
+            values[:, columns] = part.mean(axis=0) + 0.4 * (part - part.mean(axis=0))
         values[:, 1] += 3.0  # the damped legs reach 2 cm lower on average: the hips up by 3 (cm)
     row = plausibility(walk, [_edited(walk, damp)])["samples"][0]
     assert row["foot_lift_cm"] < 0.7 * row["clip_foot_lift_cm"]

@@ -4,8 +4,8 @@ rotations and contact bits, not root motion). Per sample, against the clip, at
 facing direction, pace (how far the character travels in a second, against the clip), turning
 and spinning (how fast the character's heading changes, over a second and at its fastest,
 against the clip's), foot skating and bobbing (horizontal and vertical speed of planted feet),
-how high the feet lift (a model that shuffles), floor penetration and jitter, and a one-line verdict (bobbing is reported, not
-judged: the cleanup holds ankles, not toes, at their height).
+how high the feet lift (a model that shuffles), floor penetration and jitter, and a one-line
+verdict (bobbing is reported, not judged: the cleanup holds ankles, not toes, at their height).
 
 Joints are the REFERENCE codec's (trajectory joint, contacts, up axis), found by
 name in each sample, so other systems' outputs are scored the same way.
@@ -38,9 +38,10 @@ PLANTED_RATIO = 0.5
 PENETRATION_CM = 2.0
 # Feet that shuffle: the contact joints lift (their 95th height percentile above their 5th) less than
 # this share of the clip's. The Z-up walk's kept step-400 checkpoint (at lr 1e-4, 100 % / 1.40 at its
-# check) lifted its feet 4.0 cm as sampled where the clip lifts them 10.9; the same run's weights 600
-# steps later, 8.6 cm; nothing else here saw it (BENCHMARKS.md, "Feet that shuffle"). Judged only where the clip's feet
-# lift at least LIFT_FLOOR of the character's size: an idle's few millimetres are no gait.
+# check) lifted its feet 4.0 cm as sampled where the clip lifts them 10.9; the same run's weights
+# 600 steps later, 8.6 cm; nothing else here saw it (BENCHMARKS.md, "Feet that shuffle"). Judged
+# only where the clip's feet lift at least LIFT_FLOOR of the character's size: an idle's few
+# millimetres are no gait.
 LIFT_RATIO = 0.7
 LIFT_FLOOR = 0.03
 JITTER_RATIO = 2.0
@@ -196,11 +197,6 @@ def foot_lift(t: Track, contacts: list[int], up: int) -> float:
     return float((np.percentile(heights, 95, axis=0) - np.percentile(heights, 5, axis=0)).mean())
 
 
-def lift_judged(clip_lift_m: float, size: float) -> bool:
-    """Whether the clip's feet lift enough for a sample's lift to be judged against them."""
-    return clip_lift_m >= LIFT_FLOOR * size
-
-
 def share(mask: np.ndarray) -> float:
     """The share of True in `mask` (0 when it is empty: a clip without contacts)."""
     return float(mask.mean()) if mask.size else 0.0
@@ -247,6 +243,7 @@ class Reference:
     bob_cm_s: float
     planted_share: float
     lift_m: float  # foot_lift of the clip
+    lift_judged: bool  # the clip's feet lift at least LIFT_FLOOR of its size: a sample's lift is judged
     backward_share: float
     backward_half_max: float
     heading_axis: np.ndarray
@@ -267,10 +264,12 @@ def reference_figures(ref: Track, codec: MotionCodec, contacts: list[int]) -> Re
     turning = turning_rates(heading)
     half = len(turning) // 2
     pace = paces(ref, up)
+    lift = foot_lift(ref, contacts, up)
     return Reference(codec=codec, contacts=contacts, floor=floor, joint_floors=joint_floors(ref, floor, up),
                      forward=forward, steps=root_steps(ref), speeds=_speeds(ref, up), paces=pace,
                      pace_halves_m_s=wasserstein_1d(pace[:len(pace) // 2], pace[len(pace) // 2:]), skating_cm_s=skating, bob_cm_s=bob,
-                     planted_share=share(still), lift_m=foot_lift(ref, contacts, up),
+                     planted_share=share(still), lift_m=lift,
+                     lift_judged=lift >= LIFT_FLOOR * codec.size,
                      backward_share=backward_share(ref, forward, up),
                      backward_half_max=most_backward_half(ref, forward, up), heading_axis=axis, turning=turning,
                      turning_halves_deg_s=wasserstein_1d(turning[:half], turning[half:]),
@@ -319,7 +318,7 @@ def score_sample(ref: Reference, sample: Track) -> dict:
         "clip_planted_share": ref.planted_share,
         "foot_lift_cm": foot_lift(sample, ref.contacts, up) * 100,
         "clip_foot_lift_cm": ref.lift_m * 100,
-        "lift_judged": lift_judged(ref.lift_m, size),
+        "lift_judged": ref.lift_judged,
         "penetration_cm": float(depth[below].mean() * 100) if below.any() else 0.0,
         "penetration_share": float(below.any(axis=1).mean()),
         "jitter_ratio": _ratio(jerk(sample), ref.jerk),
