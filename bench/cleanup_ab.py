@@ -1,5 +1,5 @@
 """The foot cleanup as `sample` runs it, against no cleanup, on trained models: jitter (the
-verdict's ratio to the clip's jerk), foot skating, knees locked straight, the paper's metrics
+verdict's ratio to the clip's jerk), foot skating, bobbing and lift, knees locked straight, the paper's metrics
 and the plausibility verdicts. Run it under two checkouts to compare two cleanups on the
 same samples (only `sinmdm` differs; the seeds and the model's own sampling settings are
 the same):
@@ -55,8 +55,9 @@ def score(model, clip_path: Path, protocol: str, cleanup: bool, samples: int, se
         per = scores["plausibility"]["samples"]
         rows.append({"seed": seed, **{k: scores[k] for k in ("coverage", "global_diversity", "local_diversity")},
                      "jitter_ratio": float(np.mean([s["jitter_ratio"] for s in per])),
-                     "foot_skating_cm_s": scores["plausibility"]["aggregate"]["foot_skating_cm_s"],
-                     "clip_foot_skating_cm_s": scores["plausibility"]["aggregate"]["clip_foot_skating_cm_s"]})
+                     **{k: scores["plausibility"]["aggregate"][k] for k in (
+                         "foot_skating_cm_s", "clip_foot_skating_cm_s", "foot_bob_cm_s", "clip_foot_bob_cm_s",
+                         "foot_lift_cm", "clip_foot_lift_cm")}})
         verdicts.update(s["verdict"].split(" ")[0].rstrip(":") for s in per)
         for sample in result.clips:
             angles = knee_angles(animation_from_bvh(sample), legs)

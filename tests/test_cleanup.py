@@ -50,6 +50,25 @@ def test_intervals_and_fades():
     assert contact_offsets(far, run)[1][[*range(5), *range(75, 80)]].max() == 0  # untouched far from the run
 
 
+def test_a_lowering_pin_lets_go_of_the_swing_sooner_than_a_raise():
+    # A toe descending from 7 cm when its label comes on (frame 10), on the floor from frame 13.
+    height = np.concatenate([np.linspace(2.0, 7.0, 6), np.linspace(7.0, 1.0, 8)[1:], np.ones(10)]) / 100
+    positions = np.stack([np.zeros_like(height), height, np.zeros_like(height)], axis=1)
+    inside = np.arange(len(height)) >= 10
+    anchor, weight = contact_offsets(positions, inside)
+    lowered, _ = contact_offsets(positions, inside, up=1)
+    before = weight[:10, None] * anchor[:10]
+    eased = weight[:10] * lowered[:10, 1]
+    assert np.allclose(lowered[inside], anchor[inside])  # the pin itself is the same
+    assert eased.min() < 0 and np.all(eased >= before[:, 1] - 1e-12)  # lowers the swing less
+    assert abs(eased[5]) < 0.25 * abs(before[5, 1])  # the swing's top, 5 frames out: nearly untouched
+    flat = np.zeros_like(positions)  # a foot sampled 2 cm under its resting height: the pin raises it
+    raised, w_raised = contact_offsets(flat, inside, floor=(1, 0.02), up=1)
+    raise_only, w_raise = contact_offsets(flat, inside, floor=(1, 0.02))
+    assert np.allclose(raised * w_raised[:, None], raise_only * w_raise[:, None])  # a raise eases as before
+    assert (raised[:10, 1] * w_raised[:10])[-3:].min() > 0.005
+
+
 def test_a_label_on_before_landing_or_after_lift_off_is_trimmed():
     # x: a foot arriving at 0.2 a frame, resting on frames 4-9, leaving at 0.2 a frame
     x = np.array([0.0, 0.2, 0.4, 0.6, 0.8, 0.8, 0.8, 0.8, 0.8, 0.81, 1.0, 1.2, 1.4])

@@ -16,7 +16,8 @@ with numpy IK so that planted joints stop sliding:
    the ankle's pin carries it over the frames they share, so the pins stay a foot apart.
    The IK offset (target - position) eases out after a run and in before the next one
    over about `EASE_FRAMES`, the smoothest curve that meets the pins (banded.fit_smooth),
-   so a foot lands and lifts off at its sampled speed and nothing pops. Where a leg
+   so a foot lands and lifts off at its sampled speed and nothing pops; a pin that lowers
+   the joint lets go over `LOWER_EASE` instead, so that it does not hold down the swing. Where a leg
    cannot reach its pin with the knee no straighter than sampled, the hips are lowered
    (hips_drop) rather than the knee locked straight.
 2. Legs: contact joints on one chain (Mixamo's Foot, ToeBase, Toe_End) form one
@@ -62,6 +63,11 @@ MIN_CONTACT_FRAMES = 2  # shorter runs are noise
 # (contact_offsets). A cosine fade of the offset at the run's edge over 4 frames started and stopped
 # the feet within a frame and made their jerk 2-4x the sampled feet's (BENCHMARKS.md).
 EASE_FRAMES = 3.0
+# A pin that lowers a joint eases out over about LOWER_EASE frames instead: the labels come on while
+# a toe is still descending (at 7 cm on a walk), so its pin lowers those frames, and over EASE_FRAMES
+# that lowering reached back into a swing of 8 frames and cut its top: the cleaned walk's feet lifted
+# 0.72x the clip's against 0.86x sampled, a Z-up walk's 0.37x against 0.73x (BENCHMARKS.md).
+LOWER_EASE = 1.0
 PIN_WEIGHT, FREE_WEIGHT = 1e4, 1e-3  # how strongly the fit holds the pins inside a run, and zero outside
 FADED = 1e-3  # a weight below this is none: frames far from any contact stay untouched
 LIFT_EASE = 2.0  # frames (Gaussian sigma) over which a raise off the floor eases in and out
@@ -207,7 +213,8 @@ def _run_means(runs: np.ndarray, positions: np.ndarray, frames: np.ndarray, coun
 
 
 def contact_offsets(positions: np.ndarray, inside: np.ndarray, ease: float = EASE_FRAMES,
-                    carried: np.ndarray | None = None, floor: tuple[int, float] | None = None) -> tuple[np.ndarray, np.ndarray]:
+                    carried: np.ndarray | None = None, floor: tuple[int, float] | None = None,
+                    up: int | None = None) -> tuple[np.ndarray, np.ndarray]:
     """IK offsets of one joint: `anchor` (T, 3) and `weight` (T,) with the applied
     offset = weight * anchor. Inside an interval the anchor takes the joint to the
     interval's mean position (weight 1); around it the offset eases out and in over about
@@ -218,7 +225,8 @@ def contact_offsets(positions: np.ndarray, inside: np.ndarray, ease: float = EAS
     offset carries the joint on the shared frames: pinned on their own means over their
     own runs, a sliding foot's ankle and ball land further apart than the foot is long.
     `floor` (up axis, height): no pin lies below that height (the joint's resting height in
-    the clip): a model that samples a planted foot low would otherwise pin it in the floor."""
+    the clip): a model that samples a planted foot low would otherwise pin it in the floor.
+    `up` (the up axis): outside the runs a lowering eases out over LOWER_EASE frames, a raise over `ease`."""
     frames = len(positions)
     runs = np.cumsum(np.diff(np.concatenate([[False], inside]).astype(np.int8)) == 1) * inside  # 1.. per run, 0 outside
     means, _ = _run_means(runs, positions, np.ones(frames, dtype=bool), runs.max() + 1)
@@ -232,11 +240,11 @@ def contact_offsets(positions: np.ndarray, inside: np.ndarray, ease: float = EAS
     offset = np.where(inside[:, None], means[runs] - positions, 0.0)
     # One fit for the offsets and their weights: exact inside the runs, eased to nothing outside.
     trust = np.where(inside, PIN_WEIGHT, FREE_WEIGHT)
-    # FREE_WEIGHT * ease^4 sets how far the easing reaches; the first-difference term at critical
-    # damping keeps it from ringing (the second differences alone overshoot past zero and back).
-    smoothness = FREE_WEIGHT * ease**4
-    fitted = fit_smooth(np.concatenate([offset, inside[:, None].astype(np.float64)], axis=1), trust,
-                        smoothness, 2.0 * math.sqrt(FREE_WEIGHT * smoothness))
+    fitted = _eased(np.concatenate([offset, inside[:, None].astype(np.float64)], axis=1), trust, ease)
+    if up is not None:
+        # the smaller lowering of the two easings, the larger raise
+        fitted[:, up] = np.where(inside, fitted[:, up], np.maximum(fitted[:, up], _eased(offset[:, up:up + 1], trust,
+                                                                                          LOWER_EASE)[:, 0]))
     weight = np.where(inside, 1.0, np.clip(fitted[:, 3], 0.0, 1.0))
     weight[weight < FADED] = 0.0
     anchor = np.where(weight[:, None] > 0, fitted[:, :3] / np.maximum(weight, FADED)[:, None], 0.0)
@@ -244,14 +252,24 @@ def contact_offsets(positions: np.ndarray, inside: np.ndarray, ease: float = EAS
     return anchor, weight
 
 
+def _eased(values: np.ndarray, trust: np.ndarray, ease: float) -> np.ndarray:
+    """values (T, K) fitted smoothly: held where `trust` is PIN_WEIGHT, eased to nothing over about
+    `ease` frames elsewhere."""
+    # FREE_WEIGHT * ease^4 sets how far the easing reaches; the first-difference term at critical
+    # damping keeps it from ringing (the second differences alone overshoot past zero and back).
+    smoothness = FREE_WEIGHT * ease**4
+    return fit_smooth(values, trust, smoothness, 2.0 * math.sqrt(FREE_WEIGHT * smoothness))
+
+
 def _cyclic_offsets(positions: np.ndarray, inside: np.ndarray, shift: np.ndarray, ease: float,
-                    carried: np.ndarray | None = None, floor: tuple[int, float] | None = None) -> tuple[np.ndarray, np.ndarray]:
+                    carried: np.ndarray | None = None, floor: tuple[int, float] | None = None,
+                    up: int | None = None) -> tuple[np.ndarray, np.ndarray]:
     """contact_offsets on a loop: the cycle tiled three times (moved by `shift` per cycle)
     so that intervals and fades wrap across the seam; the middle copy is returned."""
     frames = len(positions)
     tiled = np.concatenate([positions - shift, positions, positions + shift])
     anchor, weight = contact_offsets(tiled, np.tile(inside, 3), ease, None if carried is None else np.tile(carried, (3, 1)),
-                                     floor)
+                                     floor, up)
     return anchor[frames : 2 * frames], weight[frames : 2 * frames]
 
 
@@ -708,10 +726,10 @@ def _pin(animation: Animation, local: np.ndarray, codec, legs: list[Leg], free: 
             floor = None if resting is None else (up, resting[k])
             if shift is None:
                 anchors[:, k], weights[:, k] = contact_offsets(positions[:, contacts[k]], inside[:, k], carried=carried,
-                                                               floor=floor)
+                                                               floor=floor, up=up)
             else:
                 anchors[:, k], weights[:, k] = _cyclic_offsets(positions[:, contacts[k]], inside[:, k], shift, EASE_FRAMES,
-                                                               carried, floor)
+                                                               carried, floor, up)
     pinned = positions[:, contacts, up] + anchors[..., up]
     floors = np.where(inside, pinned, np.inf).min(axis=0)
     targets = _Targets(positions, anchors, weights, up, floors)
