@@ -12,6 +12,7 @@ import pytest
 from sinmdm.eval.plausibility import plausibility
 from sinmdm.runtime import SamplingOptions, generate, load_model, read_bvh
 from sinmdm.runtime.animation import Animation, animation_from_bvh, animation_to_bvh, global_positions
+from sinmdm.runtime import cleanup
 from sinmdm.runtime.cleanup import cleanup_contacts, contact_intervals, contact_offsets, trim_fast_ends
 from sinmdm.runtime.features import MotionCodec, build_codec
 
@@ -50,7 +51,7 @@ def test_intervals_and_fades():
     assert contact_offsets(far, run)[1][[*range(5), *range(75, 80)]].max() == 0  # untouched far from the run
 
 
-def test_a_lowering_pin_lets_go_of_the_swing_sooner_than_a_raise():
+def test_a_lowering_pin_lets_go_of_the_swing_sooner_than_a_raise(monkeypatch):
     # A toe descending from 7 cm when its label comes on (frame 10), on the floor from frame 13.
     height = np.concatenate([np.linspace(2.0, 7.0, 6), np.linspace(7.0, 1.0, 8)[1:], np.ones(10)]) / 100
     positions = np.stack([np.zeros_like(height), height, np.zeros_like(height)], axis=1)
@@ -63,8 +64,9 @@ def test_a_lowering_pin_lets_go_of_the_swing_sooner_than_a_raise():
     assert eased.min() < 0 and np.all(eased >= before[:, 1] - 1e-12)  # lowers the swing less
     assert abs(eased[5]) < 0.25 * abs(before[5, 1])  # the swing's top, 5 frames out: nearly untouched
     flat = np.zeros_like(positions)  # a foot sampled 2 cm under its resting height: the pin raises it
-    raised, w_raised = contact_offsets(flat, inside, floor=(1, 0.02), up=1)
-    raise_only, w_raise = contact_offsets(flat, inside, floor=(1, 0.02))
+    raised, w_raised = contact_offsets(flat, inside, up=1, floor=0.02)
+    monkeypatch.setattr(cleanup, "LOWER_EASE", cleanup.EASE_FRAMES)  # every offset eased as before the rule
+    raise_only, w_raise = contact_offsets(flat, inside, up=1, floor=0.02)
     assert np.allclose(raised * w_raised[:, None], raise_only * w_raise[:, None])  # a raise eases as before
     assert (raised[:10, 1] * w_raised[:10])[-3:].min() > 0.005
 

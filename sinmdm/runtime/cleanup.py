@@ -213,8 +213,8 @@ def _run_means(runs: np.ndarray, positions: np.ndarray, frames: np.ndarray, coun
 
 
 def contact_offsets(positions: np.ndarray, inside: np.ndarray, ease: float = EASE_FRAMES,
-                    carried: np.ndarray | None = None, floor: tuple[int, float] | None = None,
-                    up: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+                    carried: np.ndarray | None = None, up: int | None = None,
+                    floor: float | None = None) -> tuple[np.ndarray, np.ndarray]:
     """IK offsets of one joint: `anchor` (T, 3) and `weight` (T,) with the applied
     offset = weight * anchor. Inside an interval the anchor takes the joint to the
     interval's mean position (weight 1); around it the offset eases out and in over about
@@ -224,9 +224,9 @@ def contact_offsets(positions: np.ndarray, inside: np.ndarray, ease: float = EAS
     the same foot (the ankle over the ball). A run that overlaps it is pinned where that
     offset carries the joint on the shared frames: pinned on their own means over their
     own runs, a sliding foot's ankle and ball land further apart than the foot is long.
-    `floor` (up axis, height): no pin lies below that height (the joint's resting height in
-    the clip): a model that samples a planted foot low would otherwise pin it in the floor.
-    `up` (the up axis): outside the runs a lowering eases out over LOWER_EASE frames, a raise over `ease`."""
+    `up` (the up axis): outside the runs a lowering eases out over LOWER_EASE frames, a raise over `ease`.
+    `floor` (a height along `up`, which it needs): no pin lies below it (the joint's resting height in
+    the clip): a model that samples a planted foot low would otherwise pin it in the floor."""
     frames = len(positions)
     runs = np.cumsum(np.diff(np.concatenate([[False], inside]).astype(np.int8)) == 1) * inside  # 1.. per run, 0 outside
     means, _ = _run_means(runs, positions, np.ones(frames, dtype=bool), runs.max() + 1)
@@ -235,8 +235,7 @@ def contact_offsets(positions: np.ndarray, inside: np.ndarray, ease: float = EAS
         moved, counts = _run_means(runs, positions + np.nan_to_num(carried), shared, len(means))
         means = np.where(counts[:, None] > 0, moved, means)
     if floor is not None:
-        up, height = floor
-        means[:, up] = np.maximum(means[:, up], height)
+        means[:, up] = np.maximum(means[:, up], floor)
     offset = np.where(inside[:, None], means[runs] - positions, 0.0)
     # One fit for the offsets and their weights: exact inside the runs, eased to nothing outside.
     trust = np.where(inside, PIN_WEIGHT, FREE_WEIGHT)
@@ -262,14 +261,14 @@ def _eased(values: np.ndarray, trust: np.ndarray, ease: float) -> np.ndarray:
 
 
 def _cyclic_offsets(positions: np.ndarray, inside: np.ndarray, shift: np.ndarray, ease: float,
-                    carried: np.ndarray | None = None, floor: tuple[int, float] | None = None,
-                    up: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+                    carried: np.ndarray | None = None, up: int | None = None,
+                    floor: float | None = None) -> tuple[np.ndarray, np.ndarray]:
     """contact_offsets on a loop: the cycle tiled three times (moved by `shift` per cycle)
     so that intervals and fades wrap across the seam; the middle copy is returned."""
     frames = len(positions)
     tiled = np.concatenate([positions - shift, positions, positions + shift])
     anchor, weight = contact_offsets(tiled, np.tile(inside, 3), ease, None if carried is None else np.tile(carried, (3, 1)),
-                                     floor, up)
+                                     up, floor)
     return anchor[frames : 2 * frames], weight[frames : 2 * frames]
 
 
@@ -723,13 +722,13 @@ def _pin(animation: Animation, local: np.ndarray, codec, legs: list[Leg], free: 
             carried = None
             if k in above:
                 carried = np.where(inside[:, above[k], None], anchors[:, above[k]], np.nan)
-            floor = None if resting is None else (up, resting[k])
+            floor = None if resting is None else resting[k]
             if shift is None:
                 anchors[:, k], weights[:, k] = contact_offsets(positions[:, contacts[k]], inside[:, k], carried=carried,
-                                                               floor=floor, up=up)
+                                                               up=up, floor=floor)
             else:
                 anchors[:, k], weights[:, k] = _cyclic_offsets(positions[:, contacts[k]], inside[:, k], shift, EASE_FRAMES,
-                                                               carried, floor, up)
+                                                               carried, up, floor)
     pinned = positions[:, contacts, up] + anchors[..., up]
     floors = np.where(inside, pinned, np.inf).min(axis=0)
     targets = _Targets(positions, anchors, weights, up, floors)
